@@ -1,0 +1,1 @@
+"""Analysis on top of the core: model curves, plots, evaluation, discrepancy reports."""

@@ -1,0 +1,1 @@
+"""Subcommands of the ``transparency`` command (see :mod:`transparency_ros.cli`)."""
