@@ -27,6 +27,7 @@ setup(
     entry_points={
         "console_scripts": [
             "transparency = transparency_ros.cli:main",
+            "actuator_driver = transparency_ros.ros.actuator_driver:main",
         ],
     },
 )

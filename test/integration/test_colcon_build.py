@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-EXECUTABLES = ["transparency"]  # console_scripts of setup.py; later issues add the nodes
+EXECUTABLES = ["transparency", "actuator_driver"]  # console_scripts of setup.py
 IGNORE = shutil.ignore_patterns(
     ".venv*",
     ".git",

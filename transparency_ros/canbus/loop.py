@@ -1,0 +1,179 @@
+"""The driver's hardware loop: one thread, one cycle per period, ROS-free.
+
+Each cycle: ask :class:`DriverCore` for a command, send it, wait up to ``reply_timeout_s`` for the
+reply, hand the sample to ``on_sample`` (the ROS node publishes it), count a missed reply
+otherwise. A tripped reply watchdog sends the protocol's disable frames at once. Deadlines are
+absolute (no drift); a cycle that overruns by a whole period resynchronises and is counted.
+
+The loop also measures itself: achieved rate and cycle jitter (|actual period - nominal|).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from transparency_ros.canbus.client import ActuatorClient
+from transparency_ros.canbus.protocol import Feedback
+from transparency_ros.core.driver import DriverCore, DriverMode
+
+
+@dataclass(frozen=True)
+class LoopStats:
+    cycles: int
+    overruns: int
+    rate_hz: float  # achieved, over the stats window
+    jitter_p50_s: float
+    jitter_p99_s: float
+    jitter_max_s: float
+
+
+class ControlLoop:
+    def __init__(
+        self,
+        client: ActuatorClient,
+        core: DriverCore,
+        *,
+        rate_hz: float,
+        reply_timeout_s: float,
+        on_sample: Callable[[Feedback], None] = lambda _fb: None,
+        on_fault: Callable[[str], None] = lambda _reason: None,
+        on_error: Callable[[BaseException], None] = lambda _err: None,
+        clock: Callable[[], float] = time.monotonic,
+        stats_window: int = 5000,
+    ) -> None:
+        if not rate_hz > 0:
+            raise ValueError(f"rate must be > 0 Hz, got {rate_hz}")
+        self.client = client
+        self.core = core
+        self.period_s = 1.0 / rate_hz
+        self.reply_timeout_s = min(reply_timeout_s, 0.9 * self.period_s)
+        self.on_sample, self.on_fault, self.on_error = on_sample, on_fault, on_error
+        self.clock = clock
+        self.lock = threading.RLock()  # guards core and client between loop and callers
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._starts: deque[float] = deque(maxlen=stats_window)
+        self.cycles = 0
+        self.overruns = 0
+
+    # ----------------------------------------------------------------- control
+
+    def start(self) -> None:
+        if self._thread is not None:
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="actuator_loop", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def enable(self, timeout_s: float = 0.2) -> Feedback | None:
+        """Enable the motor and activate the core at the position it reports (None: no reply)."""
+        with self.lock:
+            self.core.clear_fault()
+            self.client.send(self.client.protocol.enable_frames())
+            feedback = self.client.receive(timeout_s)
+            if feedback is None:
+                self.core.fault("no reply to enable")
+                return None
+            self.core.on_feedback(feedback.position_rad)
+            self.core.activate(feedback.position_rad)
+            return feedback
+
+    def disable(self) -> None:
+        """Zero torque and motor off. Safe to call at any time, from any thread, repeatedly."""
+        with self.lock:
+            self.core.deactivate()
+            if self.client.bus is not None:
+                self.client.send(self.client.protocol.disable_frames())
+                self.client.receive(0.02)
+
+    def set_zero(self, timeout_s: float = 0.1) -> bool:
+        with self.lock:
+            frames = self.client.protocol.zero_frames(self.client.last_feedback)
+            self.client.send(frames)
+            feedback = self.client.receive(timeout_s)
+            if feedback is not None:
+                self.core.on_feedback(feedback.position_rad)
+                if self.core.mode is DriverMode.ACTIVE:
+                    self.core.activate(feedback.position_rad)  # hold the new zero
+            return feedback is not None
+
+    # ----------------------------------------------------------------- the loop
+
+    def _cycle(self) -> None:
+        with self.lock:
+            command = self.core.command(self.clock())
+            if command is None:
+                return
+            self.client.send(
+                self.client.protocol.command_frames(command, self.client.last_feedback)
+            )
+            feedback = self.client.receive(self.reply_timeout_s)
+            if feedback is not None:
+                self.core.on_feedback(feedback.position_rad)
+            elif self.core.on_missed_reply():
+                self.client.send(self.client.protocol.disable_frames())
+                reason = self.core.status.fault_reason
+            else:
+                return
+        if feedback is not None:
+            self.on_sample(feedback)
+        else:
+            self.on_fault(reason)
+
+    def _run(self) -> None:
+        deadline = self.clock()
+        try:
+            while not self._stop.is_set():
+                start = self.clock()
+                self._starts.append(start)
+                self.cycles += 1
+                self._cycle()
+                deadline += self.period_s
+                remaining = deadline - self.clock()
+                if remaining < -self.period_s:
+                    self.overruns += 1
+                    deadline = self.clock()
+                elif remaining > 0:
+                    self._stop.wait(remaining)
+        except BaseException as err:  # noqa: BLE001 - any failure must leave the motor safe
+            with self.lock:
+                self.core.fault(f"loop error: {err!r}")
+                if self.client.bus is not None:
+                    self.client.send(self.client.protocol.disable_frames())
+            self.on_error(err)
+
+    # ----------------------------------------------------------------- measurement
+
+    def stats(self) -> LoopStats:
+        starts = np.array(self._starts)
+        if starts.size < 3:
+            return LoopStats(self.cycles, self.overruns, 0.0, 0.0, 0.0, 0.0)
+        periods = np.diff(starts)
+        jitter = np.abs(periods - self.period_s)
+        return LoopStats(
+            cycles=self.cycles,
+            overruns=self.overruns,
+            rate_hz=float(periods.size / (starts[-1] - starts[0])),
+            jitter_p50_s=float(np.percentile(jitter, 50)),
+            jitter_p99_s=float(np.percentile(jitter, 99)),
+            jitter_max_s=float(jitter.max()),
+        )
+
+    def reset_stats(self) -> None:
+        self._starts.clear()

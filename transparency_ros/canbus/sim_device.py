@@ -1,0 +1,385 @@
+"""A simulated actuator on a python-can bus, answering exactly as the firmware does.
+
+The device has its own bus object on the channel (as a real motor has its own transceiver) and
+runs in a thread: each received frame first advances the physics to the present, then is handled
+by a *personality* (MIT, ODrive, moteus) that speaks the real wire protocol and sets the drive
+law the physics integrates between frames. Between frames the physics keeps running, idle ticks
+included. Physics: :mod:`transparency_ros.core.actuator_physics` (the one implementation).
+
+Fault injection for tests (more comes with the reliability work): :meth:`SimulatedActuator.silence`
+stops all replies, as a cut cable or a dead controller would.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from abc import ABC, abstractmethod
+from collections import Counter
+from collections.abc import Callable
+
+import can
+
+from transparency_ros.canbus import mit, moteus_fd, odrive
+from transparency_ros.canbus.client import BusSettings, to_frame, to_message
+from transparency_ros.canbus.errors import CanProtocolError, MalformedFrameError
+from transparency_ros.canbus.protocol import Frame
+from transparency_ros.core.actuator_physics import (
+    ActuatorPhysics,
+    ConstantTorque,
+    DriveLaw,
+    ImpedanceLaw,
+    zero_drive,
+)
+
+TWO_PI = 2.0 * math.pi
+
+
+class Personality(ABC):
+    """Device side of one protocol. Subclasses record what they saw in ``events``."""
+
+    def __init__(self, gear_ratio: float = 1.0) -> None:
+        self.gear_ratio = gear_ratio
+        self.drive: DriveLaw = zero_drive
+        self.events: Counter[str] = Counter()
+        self.zero_offset_rad = 0.0  # output side
+
+    @abstractmethod
+    def handle(self, frame: Frame, physics: ActuatorPhysics, now_s: float) -> list[Frame]:
+        """React to one frame; return the frames the device sends back."""
+
+    def tick(self, physics: ActuatorPhysics, now_s: float) -> list[Frame]:
+        """Called on idle ticks too: cyclic messages and watchdogs."""
+        return []
+
+    def position_out(self, physics: ActuatorPhysics) -> float:
+        return physics.measured_position_rad - self.zero_offset_rad
+
+
+class MitDevice(Personality):
+    """mini-cheetah / AK firmware: replies to every frame addressed to it with its state."""
+
+    def __init__(
+        self,
+        motor_id: int = 1,
+        limits: mit.MitLimits | None = None,
+        *,
+        master_id: int = 0,
+        ak_reply: bool = False,
+        gear_ratio: float = 1.0,
+    ) -> None:
+        super().__init__(gear_ratio)
+        self.motor_id, self.master_id, self.ak_reply = motor_id, master_id, ak_reply
+        self.limits = limits or mit.MitLimits()
+        self.enabled = False
+
+    def _reply(self, physics: ActuatorPhysics) -> Frame:
+        g = self.gear_ratio
+        data = mit.encode_reply(
+            self.motor_id & 0xFF,
+            self.position_out(physics) * g,
+            physics.velocity_rad_s * g,
+            physics.state.applied_torque_nm / g,
+            self.limits,
+            temperature_raw=65 if self.ak_reply else None,
+            error_code=0 if self.ak_reply else None,
+        )
+        return Frame(self.master_id, data)
+
+    def handle(self, frame: Frame, physics: ActuatorPhysics, now_s: float) -> list[Frame]:
+        if frame.arbitration_id != self.motor_id or frame.is_remote:
+            return []
+        if len(frame.data) != 8:
+            self.events["malformed"] += 1
+            return []  # the firmware ignores frames of the wrong length
+        special = mit.SPECIAL_FRAMES.get(bytes(frame.data))
+        if special == "enter":
+            self.enabled = True
+        elif special == "exit":
+            self.enabled = False
+            self.drive = zero_drive
+        elif special == "zero":
+            self.zero_offset_rad = physics.measured_position_rad
+        else:
+            special = "command"
+            if self.enabled:
+                cmd = mit.decode_command(frame.data, self.limits)
+                g = self.gear_ratio
+                self.drive = _OffsetLaw(
+                    ImpedanceLaw(
+                        cmd.kp * g * g,
+                        cmd.kd * g * g,
+                        cmd.position_rad / g,
+                        cmd.velocity_rad_s / g,
+                        cmd.torque_nm * g,
+                    ),
+                    self.zero_offset_rad,
+                )
+        self.events[special] += 1
+        return [self._reply(physics)]
+
+
+class ODriveDevice(Personality):
+    """ODrive firmware 0.6: answers RTR requests, sends a heartbeat every 100 ms."""
+
+    HEARTBEAT_PERIOD_S = 0.1
+
+    def __init__(self, node_id: int = 0, *, gear_ratio: float = 1.0) -> None:
+        super().__init__(gear_ratio)
+        self.node_id = node_id
+        self.axis_state = odrive.AxisState.IDLE
+        self.control_mode = odrive.ControlMode.POSITION
+        self.torque_setpoint_nm = 0.0  # native (motor side)
+        self._last_heartbeat_s = -math.inf
+
+    def _id(self, cmd: odrive.Cmd) -> int:
+        return odrive.arbitration_id(self.node_id, cmd)
+
+    def _apply(self) -> None:
+        closed = self.axis_state == odrive.AxisState.CLOSED_LOOP_CONTROL
+        if closed and self.control_mode == odrive.ControlMode.TORQUE:
+            self.drive = ConstantTorque(self.torque_setpoint_nm * self.gear_ratio)
+        else:
+            self.drive = zero_drive
+
+    def handle(self, frame: Frame, physics: ActuatorPhysics, now_s: float) -> list[Frame]:
+        if frame.arbitration_id > 0x7FF:
+            return []
+        node, cmd = odrive.split_id(frame.arbitration_id)
+        if node != self.node_id:
+            return []
+        g = self.gear_ratio
+        try:
+            if frame.is_remote and cmd == odrive.Cmd.GET_ENCODER_ESTIMATES:
+                self.events["get_encoder_estimates"] += 1
+                est = odrive.EncoderEstimates(
+                    self.position_out(physics) * g / TWO_PI, physics.velocity_rad_s * g / TWO_PI
+                )
+                return [
+                    Frame(
+                        self._id(odrive.Cmd.GET_ENCODER_ESTIMATES),
+                        odrive.encode_encoder_estimates(est),
+                    )
+                ]
+            if frame.is_remote and cmd == odrive.Cmd.GET_TORQUES:
+                self.events["get_torques"] += 1
+                torque = physics.state.applied_torque_nm / g
+                return [
+                    Frame(
+                        self._id(odrive.Cmd.GET_TORQUES),
+                        odrive.encode_torques(odrive.Torques(self.torque_setpoint_nm, torque)),
+                    )
+                ]
+            if cmd == odrive.Cmd.SET_AXIS_STATE:
+                self.axis_state = odrive.AxisState(odrive.decode_set_axis_state(frame.data))
+                self.events[f"axis_state_{self.axis_state.name.lower()}"] += 1
+            elif cmd == odrive.Cmd.SET_CONTROLLER_MODE:
+                control, _ = odrive.decode_set_controller_mode(frame.data)
+                self.control_mode = odrive.ControlMode(control)
+                self.events["set_controller_mode"] += 1
+            elif cmd == odrive.Cmd.SET_INPUT_TORQUE:
+                self.torque_setpoint_nm = odrive.decode_set_input_torque(frame.data)
+                self.events["set_input_torque"] += 1
+            else:
+                self.events["ignored"] += 1
+        except (MalformedFrameError, ValueError):
+            self.events["malformed"] += 1
+        self._apply()
+        return []
+
+    def tick(self, physics: ActuatorPhysics, now_s: float) -> list[Frame]:
+        if now_s - self._last_heartbeat_s < self.HEARTBEAT_PERIOD_S:
+            return []
+        self._last_heartbeat_s = now_s
+        hb = odrive.Heartbeat(0, int(self.axis_state), 0, True)
+        return [Frame(self._id(odrive.Cmd.HEARTBEAT), odrive.encode_heartbeat(hb))]
+
+
+class MoteusDevice(Personality):
+    """moteus: register writes set the mode and position-mode terms; reads are answered."""
+
+    def __init__(
+        self,
+        device_id: int = 1,
+        *,
+        kp_nm_per_rev: float = 200.0,
+        kd_nms_per_rev: float = 5.0,
+        gear_ratio: float = 1.0,
+    ) -> None:
+        super().__init__(gear_ratio)
+        self.device_id = device_id
+        self.kp, self.kd = kp_nm_per_rev, kd_nms_per_rev
+        self.mode = moteus_fd.Mode.STOPPED
+        self.registers: dict[int, float] = {}
+        self._watchdog_deadline_s = math.inf
+
+    def _apply(self, now_s: float) -> None:
+        r = self.registers
+        if self.mode != moteus_fd.Mode.POSITION:
+            self.drive = zero_drive
+            return
+        g = self.gear_ratio
+        position = r.get(moteus_fd.Reg.COMMAND_POSITION, math.nan)
+        kp_scale = r.get(moteus_fd.Reg.COMMAND_KP_SCALE, 1.0)
+        kd_scale = r.get(moteus_fd.Reg.COMMAND_KD_SCALE, 1.0)
+        law = ImpedanceLaw(
+            kp=0.0 if math.isnan(position) else self.kp * kp_scale * g * g / TWO_PI,
+            kd=self.kd * kd_scale * g * g / TWO_PI,
+            position_rad=0.0 if math.isnan(position) else position * TWO_PI / g,
+            velocity_rad_s=r.get(moteus_fd.Reg.COMMAND_VELOCITY, 0.0) * TWO_PI / g,
+            torque_ff_nm=r.get(moteus_fd.Reg.COMMAND_FEEDFORWARD_TORQUE, 0.0) * g,
+        )
+        self.drive = law
+        timeout = r.get(moteus_fd.Reg.COMMAND_TIMEOUT, math.nan)
+        self._watchdog_deadline_s = now_s + timeout if math.isfinite(timeout) else math.inf
+
+    def handle(self, frame: Frame, physics: ActuatorPhysics, now_s: float) -> list[Frame]:
+        source, destination, reply = moteus_fd.split_id(frame.arbitration_id)
+        if destination != self.device_id or frame.is_remote:
+            return []
+        try:
+            subframes = moteus_fd.parse_frame(frame.data)
+        except MalformedFrameError:
+            self.events["malformed"] += 1
+            return []
+        reads: dict[int, moteus_fd.Res] = {}
+        for sub in subframes:
+            if sub.op == moteus_fd.WRITE and sub.value is not None:
+                if sub.register == moteus_fd.Reg.MODE:
+                    self.mode = moteus_fd.Mode(int(sub.value))
+                    self.events[f"mode_{self.mode.name.lower()}"] += 1
+                else:
+                    self.registers[sub.register] = float(sub.value)
+            elif sub.op == moteus_fd.READ and sub.resolution is not None:
+                reads[sub.register] = sub.resolution
+        self._apply(now_s)
+        if not (reply and reads):
+            return []
+        g = self.gear_ratio
+        state: dict[int, float] = {
+            moteus_fd.Reg.MODE: float(self.mode),
+            moteus_fd.Reg.POSITION: self.position_out(physics) * g / TWO_PI,
+            moteus_fd.Reg.VELOCITY: physics.velocity_rad_s * g / TWO_PI,
+            moteus_fd.Reg.TORQUE: physics.state.applied_torque_nm / g,
+            moteus_fd.Reg.VOLTAGE: 24.0,
+            moteus_fd.Reg.TEMPERATURE: 30.0,
+            moteus_fd.Reg.FAULT: 0.0,
+        }
+        values = {reg: (state.get(reg, math.nan), res) for reg, res in reads.items()}
+        payload = moteus_fd.pad_fd(moteus_fd.encode_values(moteus_fd.REPLY, values))
+        arb = moteus_fd.arbitration_id(self.device_id, source, reply=False)
+        return [Frame(arb, payload, is_fd=True, is_extended_id=True)]
+
+    def tick(self, physics: ActuatorPhysics, now_s: float) -> list[Frame]:
+        if self.mode == moteus_fd.Mode.POSITION and now_s > self._watchdog_deadline_s:
+            self.mode = moteus_fd.Mode.TIMEOUT
+            self.events["watchdog_timeout"] += 1
+            self.drive = ImpedanceLaw(0.0, self.kd * self.gear_ratio**2 / TWO_PI, 0.0, 0.0, 0.0)
+        return []
+
+
+class _OffsetLaw:
+    """Evaluate a law in the device's zeroed frame (position reads zero at the set-zero point)."""
+
+    def __init__(self, law: DriveLaw, offset_rad: float) -> None:
+        self.law, self.offset_rad = law, offset_rad
+
+    def __call__(self, position: float, velocity: float) -> float:
+        return self.law(position - self.offset_rad, velocity)
+
+
+class SimulatedActuator:
+    """A device on the bus: its own python-can bus object, a thread, the physics."""
+
+    def __init__(
+        self,
+        physics: ActuatorPhysics,
+        personality: Personality,
+        bus_settings: BusSettings | None = None,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        idle_tick_s: float = 0.002,
+    ) -> None:
+        self.physics = physics
+        self.personality = personality
+        self.settings = bus_settings or BusSettings()
+        if self.settings.interface != "virtual":
+            raise CanProtocolError("the simulated actuator only attaches to a 'virtual' bus")
+        self.clock = clock
+        self.idle_tick_s = idle_tick_s
+        self.lock = threading.Lock()
+        self._silent = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._bus: can.BusABC | None = None
+        self._last_s: float | None = None
+        self.replies_sent = 0
+        self.frames_received = 0
+
+    def start(self) -> SimulatedActuator:
+        if self._thread is not None:
+            return self
+        self._bus = self.settings.open()
+        self._last_s = self.clock()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="simulated_actuator", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self._bus is not None:
+            self._bus.shutdown()
+            self._bus = None
+
+    def __enter__(self) -> SimulatedActuator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def silence(self, silent: bool = True) -> None:
+        """Stop (or resume) answering, as a cut cable would."""
+        if silent:
+            self._silent.set()
+        else:
+            self._silent.clear()
+
+    @property
+    def events(self) -> Counter[str]:
+        with self.lock:
+            return Counter(self.personality.events)
+
+    def _advance(self, now: float) -> None:
+        last = self._last_s if self._last_s is not None else now
+        if now > last:
+            self.physics.advance(now - last, self.personality.drive)
+        self._last_s = now
+
+    def _run(self) -> None:
+        bus = self._bus
+        assert bus is not None
+        while not self._stop.is_set():
+            try:
+                msg = bus.recv(timeout=self.idle_tick_s)
+            except (can.CanError, OSError):
+                continue
+            with self.lock:
+                now = self.clock()
+                self._advance(now)
+                if msg is not None:
+                    self.frames_received += 1
+                out = self.personality.handle(to_frame(msg), self.physics, now) if msg else []
+                out += self.personality.tick(self.physics, now)
+            if self._silent.is_set():
+                continue
+            for frame in out:
+                try:
+                    bus.send(to_message(frame))
+                    self.replies_sent += 1
+                except (can.CanError, OSError):
+                    continue
