@@ -17,12 +17,13 @@ export ROS_DOMAIN_ID := $(shell $(PYTHON) transparency_ros/rosenv.py)
 # Plots are written to files; never try to open a window.
 export MPLBACKEND := Agg
 
-.PHONY: all demo test lint typecheck pytest lock clean help
+.PHONY: all demo test lint typecheck pytest bench lock clean help
 all: test
 
 help:
 	@echo "make demo   run the demonstration into $(DEMO_OUT)/"
 	@echo "make test   lint, type-check and run the test suite"
+	@echo "make bench  run the benchmarks (benchmarks/), results in benchmarks/results/"
 	@echo "make lock   re-resolve requirements/*.in into requirements/constraints.txt"
 	@echo "make clean  remove .venv and generated output"
 
@@ -46,6 +47,9 @@ pytest: $(STAMP)
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
 test: lint typecheck pytest
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/driver_loop.py
 
 # Re-resolve the pins (run by a maintainer, then commit requirements/constraints.txt).
 lock:

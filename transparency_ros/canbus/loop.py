@@ -102,11 +102,22 @@ class ControlLoop:
                 self.client.send(self.client.protocol.disable_frames())
                 self.client.receive(0.02)
 
-    def set_zero(self, timeout_s: float = 0.1) -> bool:
+    def set_zero(self, timeout_s: float = 0.1, quiet_s: float = 0.005) -> bool:
+        """Make the current position read zero, then hold there.
+
+        Replies still in flight from earlier commands would report the old frame of reference,
+        so queued frames are dropped first and the *last* reply of a short quiet window is used
+        (a device answers in order, so that one is the answer to the zero request).
+        """
         with self.lock:
-            frames = self.client.protocol.zero_frames(self.client.last_feedback)
-            self.client.send(frames)
+            self.client.drain()
+            self.client.send(self.client.protocol.zero_frames(self.client.last_feedback))
             feedback = self.client.receive(timeout_s)
+            while feedback is not None:
+                later = self.client.receive(quiet_s)
+                if later is None:
+                    break
+                feedback = later
             if feedback is not None:
                 self.core.on_feedback(feedback.position_rad)
                 if self.core.mode is DriverMode.ACTIVE:

@@ -53,6 +53,10 @@ class Personality(ABC):
         """Called on idle ticks too: cyclic messages and watchdogs."""
         return []
 
+    @abstractmethod
+    def is_enabled(self) -> bool:
+        """Whether the firmware would drive the motor now (motor mode / closed loop / position)."""
+
     def position_out(self, physics: ActuatorPhysics) -> float:
         return physics.measured_position_rad - self.zero_offset_rad
 
@@ -73,6 +77,9 @@ class MitDevice(Personality):
         self.motor_id, self.master_id, self.ak_reply = motor_id, master_id, ak_reply
         self.limits = limits or mit.MitLimits()
         self.enabled = False
+
+    def is_enabled(self) -> bool:
+        return self.enabled
 
     def _reply(self, physics: ActuatorPhysics) -> Frame:
         g = self.gear_ratio
@@ -135,6 +142,9 @@ class ODriveDevice(Personality):
 
     def _id(self, cmd: odrive.Cmd) -> int:
         return odrive.arbitration_id(self.node_id, cmd)
+
+    def is_enabled(self) -> bool:
+        return self.axis_state == odrive.AxisState.CLOSED_LOOP_CONTROL
 
     def _apply(self) -> None:
         closed = self.axis_state == odrive.AxisState.CLOSED_LOOP_CONTROL
@@ -213,6 +223,9 @@ class MoteusDevice(Personality):
         self.mode = moteus_fd.Mode.STOPPED
         self.registers: dict[int, float] = {}
         self._watchdog_deadline_s = math.inf
+
+    def is_enabled(self) -> bool:
+        return self.mode == moteus_fd.Mode.POSITION
 
     def _apply(self, now_s: float) -> None:
         r = self.registers

@@ -140,6 +140,16 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         high=1.0,
     ),
     P("autostart", True, "configure and activate on start", read_only=True),
+    P(
+        "gil_switch_interval_s",
+        1e-4,
+        "Python's thread switch interval for this process (the "
+        "hardware loop waits up to this long for the interpreter; Python's default 5 ms stalls it "
+        "behind busy executor threads); 0 leaves it unchanged",
+        read_only=True,
+        low=0.0,
+        high=0.01,
+    ),
     P("mit.p_min_rad", -12.5, "MIT position range min (firmware specific)", read_only=True),
     P("mit.p_max_rad", 12.5, "MIT position range max", read_only=True),
     P("mit.v_min_rad_s", -22.5, "MIT velocity range min", read_only=True),
@@ -222,6 +232,11 @@ class ActuatorDriverNode(LifecycleNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.values = declare(self, PARAMETERS)
+        if self.values["gil_switch_interval_s"] > 0:
+            sys.setswitchinterval(self.values["gil_switch_interval_s"])
+            self.get_logger().info(
+                f"process thread switch interval set to {sys.getswitchinterval() * 1e6:.0f} us"
+            )
         self.core = DriverCore(DriverSettings(**{
             field: _settings_value(name, self.values[name]) for name, field in RUNTIME.items()
         }))  # fmt: skip
@@ -241,6 +256,9 @@ class ActuatorDriverNode(LifecycleNode):
         self.create_service(Trigger, "~/set_zero", self._on_set_zero)
         self.create_service(SetBool, "~/enable", self._on_enable)
         atexit.register(self.make_safe)
+        # A signal shuts the context down before spin() returns: stop the hardware loop at that
+        # moment (it would otherwise publish on a dead context) and leave the motor disabled.
+        self.context.on_shutdown(self._stop_and_disable)
         if self.values["autostart"]:
             self.trigger_configure()
             if self.configured:
@@ -414,9 +432,16 @@ class ActuatorDriverNode(LifecycleNode):
             self._joint_pub = None
         if self.client is not None:
             self.client.close()
+            self.client = None
+            self.protocol = None
         if self.sim is not None:
             time.sleep(0.01)  # let the device take the last frames
             self.sim.stop()
+            seen = ", ".join(f"{k}={v}" for k, v in sorted(self.sim.events.items()))
+            driven = self.sim.personality.is_enabled()
+            rclpy.logging.get_logger(NODE_NAME).info(
+                f"simulated actuator saw: {seen}; motor enabled at exit: {driven}"
+            )
             self.sim = None
         self.loop = None
 
@@ -537,8 +562,11 @@ class ActuatorDriverNode(LifecycleNode):
             st = self.loop.stats()
             values.update(
                 loop_rate_hz=f"{st.rate_hz:.1f}",
+                loop_cycles=st.cycles,
                 overruns=st.overruns,
+                jitter_p50_us=f"{st.jitter_p50_s * 1e6:.0f}",
                 jitter_p99_us=f"{st.jitter_p99_s * 1e6:.0f}",
+                jitter_max_us=f"{st.jitter_max_s * 1e6:.0f}",
             )
         status.values = [KeyValue(key=k, value=str(val)) for k, val in values.items()]
         array = DiagnosticArray(status=[status])

@@ -1,0 +1,53 @@
+"""Launch-free ROS fixtures: each test gets its own rclpy Context, shut down afterwards."""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+
+
+@pytest.fixture
+def ros_context() -> Iterator[Context]:
+    context = Context()
+    rclpy.init(context=context)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+class Spinner:
+    """A MultiThreadedExecutor spinning the given nodes in a background thread."""
+
+    def __init__(self, context: Context, *nodes: Node) -> None:
+        self.executor = MultiThreadedExecutor(num_threads=3, context=context)
+        for node in nodes:
+            self.executor.add_node(node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        # the context may be shut down under a spinning executor at teardown
+        with contextlib.suppress(Exception):
+            self.executor.spin()
+
+    def stop(self) -> None:
+        self.executor.shutdown(timeout_sec=2.0)
+        self.thread.join(timeout=2.0)
+
+
+def wait_for(condition: Callable[[], Any], timeout_s: float = 5.0, period_s: float = 0.01) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(period_s)
+    return bool(condition())

@@ -1,0 +1,304 @@
+"""The actuator_driver node, launch-free with real rclpy, against the simulated actuator.
+
+Each test runs the node in its own Context with a probe node that talks to it only through ROS:
+topics, the parameter services, the node's services and the lifecycle services.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
+
+from test.ros.conftest import Spinner, wait_for  # noqa: E402
+from transparency_ros.core.driver import DriverMode  # noqa: E402
+from transparency_ros.ros.actuator_driver import ActuatorDriverNode  # noqa: E402
+
+pytestmark = pytest.mark.ros
+PROTOCOLS = ["mit", "odrive", "moteus"]
+EXIT_EVENT = {"mit": "exit", "odrive": "axis_state_idle", "moteus": "mode_stopped"}
+_channels = itertools.count()
+
+
+@dataclass
+class Probe:
+    """The test's side: a plain node that subscribes, publishes and calls services."""
+
+    node: Node
+    states: list[JointState] = field(default_factory=list)
+    diagnostics: list[DiagnosticStatus] = field(default_factory=list)
+    commands: Any = None
+
+    def command(self, position: float, name: str = "joint") -> None:
+        self.commands.publish(JointState(name=[name], position=[position]))
+
+    def call(self, srv_type: Any, name: str, request: Any, timeout_s: float = 5.0) -> Any:
+        client = self.node.create_client(srv_type, name)
+        ok = client.wait_for_service(timeout_sec=timeout_s)
+        assert ok, f"{name} not available; graph: {self.node.get_service_names_and_types()}"
+        future = client.call_async(request)
+        assert wait_for(future.done, timeout_s), f"{name} did not answer"
+        return future.result()
+
+    def set_params(self, **values: Any) -> list[Any]:
+        client = AsyncParameterClient(self.node, "actuator_driver")
+        assert client.wait_for_services(timeout_sec=5.0)
+        future = client.set_parameters([Parameter(k, value=v) for k, v in values.items()])
+        assert wait_for(future.done, 5.0)
+        return list(future.result().results)
+
+    def last_position(self) -> float:
+        return float(self.states[-1].position[0])
+
+
+def make_probe(context: Context) -> Probe:
+    node = Node("probe", context=context)
+    probe = Probe(node)
+    node.create_subscription(JointState, "/joint_states", probe.states.append, 100)
+    node.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda msg: probe.diagnostics.extend(msg.status), 10
+    )
+    probe.commands = node.create_publisher(JointState, "/joint_commands", 10)
+    return probe
+
+
+@pytest.fixture
+def driver_factory(ros_context: Context) -> Iterator[Any]:
+    started: list[tuple[ActuatorDriverNode, Probe, Spinner]] = []
+
+    def start(protocol: str, **params: Any) -> tuple[ActuatorDriverNode, Probe]:
+        values = {
+            "protocol": protocol,
+            "channel": f"ros_test_{next(_channels)}",
+            "publish_rate_hz": 250.0,
+            "reply_timeout_s": 0.002,
+            **params,
+        }
+        node = ActuatorDriverNode(
+            context=ros_context,
+            parameter_overrides=[Parameter(k, value=v) for k, v in values.items()],
+        )
+        probe = make_probe(ros_context)
+        spinner = Spinner(ros_context, node, probe.node)
+        started.append((node, probe, spinner))
+        return node, probe
+
+    yield start
+    for node, probe, spinner in started:
+        node.make_safe()
+        spinner.stop()
+        node.destroy_node()
+        probe.node.destroy_node()
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_commands_move_the_joint_at_the_configured_rate(driver_factory: Any, protocol: str) -> None:
+    node, probe = driver_factory(protocol)
+    assert wait_for(lambda: len(probe.states) > 20)
+    # rate: count what arrives over 2 s
+    before, t0 = len(probe.states), time.monotonic()
+    time.sleep(2.0)
+    rate = (len(probe.states) - before) / (time.monotonic() - t0)
+    assert rate == pytest.approx(250.0, rel=0.1)
+    msg = probe.states[-1]
+    assert msg.name == ["joint"] and len(msg.position) == len(msg.velocity) == len(msg.effort) == 1
+    stamps = [s.header.stamp.sec + s.header.stamp.nanosec * 1e-9 for s in probe.states[-100:]]
+    assert all(b > a for a, b in itertools.pairwise(stamps))
+    # commands move the simulated joint (U10DD: within the static friction band tau_s / k_s)
+    probe.command(0.7)
+    assert wait_for(lambda: abs(probe.last_position() - 0.7) < 0.075 / 2.0 + 0.01, 3.0)
+    assert abs(node.sim.physics.state.motor_position_rad - 0.7) < 0.05
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_gains_change_at_runtime(driver_factory: Any, protocol: str) -> None:
+    """T2822 is overdamped: it creeps to the target until k_s * error = Coulomb friction."""
+    node, probe = driver_factory(protocol, sim_actuator="T2822", command_timeout_s=30.0)
+    assert wait_for(lambda: len(probe.states) > 5)
+    coulomb = 0.114
+    probe.command(0.5)
+    assert wait_for(lambda: abs(0.5 - probe.last_position() - coulomb / 2.0) < 0.01, 5.0), (
+        probe.last_position()
+    )
+    results = probe.set_params(k_s=20.0)
+    assert [r.successful for r in results] == [True]
+    assert node.core.settings.k_s_nm_per_rad == 20.0
+    assert wait_for(lambda: abs(0.5 - probe.last_position() - coulomb / 20.0) < 0.003, 5.0), (
+        probe.last_position()
+    )
+    # refused changes keep the old value and say why
+    refused = probe.set_params(position_min_rad=50.0)
+    assert not refused[0].successful and "position limits" in refused[0].reason
+    out_of_range = probe.set_params(k_s=-1.0)
+    assert not out_of_range[0].successful
+    assert node.core.settings.k_s_nm_per_rad == 20.0
+    if protocol == "mit":
+        too_stiff = probe.set_params(k_s=600.0)
+        assert not too_stiff[0].successful and "MIT range" in too_stiff[0].reason
+    read_only = probe.set_params(protocol="odrive")
+    assert not read_only[0].successful
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_silent_bus_trips_the_fault(driver_factory: Any, protocol: str) -> None:
+    node, probe = driver_factory(protocol, max_missed_replies=5)
+    assert wait_for(lambda: len(probe.states) > 20)
+    sim = node.sim
+    exits = sim.events[EXIT_EVENT[protocol]]
+    sim.silence()
+    assert wait_for(lambda: node.core.mode is DriverMode.FAULT, 3.0)
+    assert node.core.status.missed_replies_in_row == 5
+    assert wait_for(lambda: any(d.level == DiagnosticStatus.ERROR for d in probe.diagnostics))
+    error = next(d for d in probe.diagnostics if d.level == DiagnosticStatus.ERROR)
+    assert "5 replies missed in a row" in error.message
+    keys = {kv.key: kv.value for kv in error.values}
+    assert {"tx", "rx", "timeouts", "malformed"} <= set(keys) and int(keys["timeouts"]) >= 5
+    assert wait_for(lambda: sim.events[EXIT_EVENT[protocol]] > exits), sim.events
+    # re-enable once the device answers again
+    sim.silence(False)
+    response = probe.call(SetBool, "/actuator_driver/enable", SetBool.Request(data=True))
+    assert response.success and node.core.mode is DriverMode.ACTIVE
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_shutdown_disables_the_motor(driver_factory: Any, protocol: str) -> None:
+    node, probe = driver_factory(protocol)
+    assert wait_for(lambda: len(probe.states) > 5)
+    sim = node.sim
+    node.trigger_shutdown()
+    assert sim.events[EXIT_EVENT[protocol]] >= 1
+    assert node.sim is None and node.client is None
+    assert not sim.personality.is_enabled()
+    assert sim.personality.drive(0.3, 1.0) == 0.0
+
+
+def test_services_and_bad_commands(driver_factory: Any) -> None:
+    node, probe = driver_factory("mit")
+    assert wait_for(lambda: len(probe.states) > 5)
+    probe.command(0.4)
+    assert wait_for(lambda: abs(probe.last_position() - 0.4) < 0.05)
+    zero = probe.call(Trigger, "/actuator_driver/set_zero", Trigger.Request())
+    assert zero.success
+    assert wait_for(lambda: abs(probe.last_position()) < 0.01)
+    # bad commands are rejected and counted; the node keeps publishing
+    rejected_before = node.core.status.commands_rejected
+    probe.commands.publish(JointState(name=["joint"], position=[math.nan]))
+    probe.commands.publish(JointState(name=["elbow"], position=[0.1]))
+    probe.commands.publish(JointState(name=["joint", "x"], position=[0.1]))
+    assert wait_for(lambda: node.core.status.commands_rejected == rejected_before + 3)
+    count = len(probe.states)
+    assert wait_for(lambda: len(probe.states) > count + 20)
+    # disable: zero torque and motor mode off, no more samples
+    off = probe.call(SetBool, "/actuator_driver/enable", SetBool.Request(data=False))
+    assert off.success and node.sim.events["exit"] >= 1
+    time.sleep(0.05)
+    count = len(probe.states)
+    time.sleep(0.2)
+    assert len(probe.states) == count
+
+
+def test_autostart_false_waits_for_lifecycle_transitions(driver_factory: Any) -> None:
+    """With autostart off the node waits; each transition does what it promises.
+
+    The transitions go through the node's lifecycle state machine (the code the
+    ~/change_state service calls). The service itself is not exercised here: in a process that
+    has created and destroyed many rclpy contexts, as this one has, it is occasionally
+    unreachable (README, "Known issues").
+    """
+    node, probe = driver_factory("moteus", autostart=False)
+    time.sleep(0.3)
+    assert not probe.states and node.client is None and node.sim is None
+    node.trigger_configure()
+    assert node.configured and node.core.mode is DriverMode.INACTIVE
+    time.sleep(0.2)
+    assert not probe.states, "published while only configured"
+    node.trigger_activate()
+    assert wait_for(lambda: len(probe.states) > 10)
+    sim = node.sim
+    node.trigger_deactivate()
+    assert not sim.personality.is_enabled()
+    time.sleep(0.05)
+    count = len(probe.states)
+    time.sleep(0.3)
+    assert len(probe.states) == count, "still publishing after deactivate"
+    node.trigger_cleanup()
+    assert node.client is None and node.sim is None
+
+
+def start_driver_process(*ros_args: str) -> subprocess.Popen[str]:
+    exe = Path(sys.executable).parent / "actuator_driver"
+    return subprocess.Popen(
+        [
+            str(exe),
+            "--ros-args",
+            "-p",
+            "publish_rate_hz:=200.0",
+            "-p",
+            "reply_timeout_s:=0.002",
+            *ros_args,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=dict(os.environ),
+    )
+
+
+def seen_line(output: str) -> str:
+    return next(line for line in output.splitlines() if "simulated actuator saw:" in line)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signals_leave_the_motor_disabled(ros_context: Context, sig: signal.Signals) -> None:
+    """`ros2 run transparency_ros actuator_driver` as a process, stopped by a signal."""
+    proc = start_driver_process()
+    probe = make_probe(ros_context)
+    spinner = Spinner(ros_context, probe.node)
+    try:
+        assert wait_for(lambda: len(probe.states) > 20, 15.0), "no /joint_states from the process"
+        proc.send_signal(sig)
+        output, _ = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        spinner.stop()
+        probe.node.destroy_node()
+    assert proc.returncode == 0, output
+    assert "shut down: motor disabled, bus closed" in output
+    seen = seen_line(output)
+    assert "enter=1" in seen and "exit=" in seen
+    assert seen.endswith("motor enabled at exit: False")
+
+
+def test_help_lists_parameters() -> None:
+    exe = Path(sys.executable).parent / "actuator_driver"
+    out = subprocess.run([str(exe), "--help"], capture_output=True, text=True, check=True)
+    for name in (
+        "interface",
+        "channel",
+        "protocol",
+        "k_s",
+        "command_timeout_s",
+        "max_missed_replies",
+        "publish_rate_hz",
+    ):
+        assert f"  {name} = " in out.stdout

@@ -1,0 +1,133 @@
+"""Client, control loop and simulated device on a python-can virtual bus, for each protocol."""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from transparency_ros.canbus.client import ActuatorClient, BusSettings
+from transparency_ros.canbus.errors import BusError
+from transparency_ros.canbus.loop import ControlLoop
+from transparency_ros.canbus.protocol import (
+    ActuatorProtocol,
+    MitProtocol,
+    MoteusProtocol,
+    ODriveProtocol,
+)
+from transparency_ros.canbus.sim_device import (
+    MitDevice,
+    MoteusDevice,
+    ODriveDevice,
+    Personality,
+    SimulatedActuator,
+)
+from transparency_ros.core.actuator_physics import ActuatorPhysics, PhysicsParams
+from transparency_ros.core.config import get_actuator
+from transparency_ros.core.driver import DriverCore, DriverMode, DriverSettings, JointTarget
+
+_channels = itertools.count()
+EXIT_EVENT = {"mit": "exit", "odrive": "axis_state_idle", "moteus": "mode_stopped"}
+
+
+def make(name: str) -> tuple[ActuatorProtocol, Personality]:
+    if name == "mit":
+        return MitProtocol(1), MitDevice(1)
+    if name == "odrive":
+        return ODriveProtocol(5), ODriveDevice(5)
+    return MoteusProtocol(2), MoteusDevice(2)
+
+
+@pytest.fixture(params=["mit", "odrive", "moteus"])
+def rig(request: pytest.FixtureRequest) -> Iterator[tuple[str, ControlLoop, SimulatedActuator]]:
+    name = request.param
+    protocol, personality = make(name)
+    settings = BusSettings(channel=f"loop_test_{next(_channels)}", fd=protocol.is_fd)
+    physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
+    sim = SimulatedActuator(physics, personality, settings).start()
+    client = ActuatorClient(protocol, settings.open())
+    core = DriverCore(DriverSettings(max_missed_replies=4))
+    loop = ControlLoop(client, core, rate_hz=500.0, reply_timeout_s=0.0015)
+    yield name, loop, sim
+    loop.stop()
+    loop.disable()
+    client.close()
+    sim.stop()
+
+
+def wait_for(condition, timeout_s: float = 3.0) -> bool:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def test_commands_move_the_simulated_joint(rig: tuple[str, ControlLoop, SimulatedActuator]) -> None:
+    name, loop, sim = rig
+    assert loop.enable() is not None
+    loop.start()
+    with loop.lock:
+        loop.core.set_target(JointTarget(0.6), time.monotonic())
+    band = 0.075 / 2.0 + 0.01  # static friction / k_s, plus the 1-cycle delay of ODrive
+    assert wait_for(lambda: abs(sim.physics.state.motor_position_rad - 0.6) < band), name
+    fb = loop.client.last_feedback
+    assert fb is not None and abs(fb.position_rad - 0.6) < band
+    stats = loop.stats()
+    assert stats.cycles > 50 and loop.client.counters.malformed == 0
+    loop.stop()
+    loop.disable()
+    assert wait_for(lambda: sim.events[EXIT_EVENT[name]] >= 1), sim.events
+
+
+def test_silent_bus_trips_the_fault_after_the_configured_misses(
+    rig: tuple[str, ControlLoop, SimulatedActuator],
+) -> None:
+    name, loop, sim = rig
+    assert loop.enable() is not None
+    faults: list[str] = []
+    loop.on_fault = faults.append
+    loop.start()
+    assert wait_for(lambda: loop.client.counters.samples > 20)
+    exits_before = sim.events[EXIT_EVENT[name]]
+    sim.silence()
+    assert wait_for(lambda: loop.core.mode is DriverMode.FAULT)
+    assert faults == ["4 replies missed in a row"]
+    assert loop.core.status.missed_replies_in_row == 4
+    # the safe command went out although nothing answers
+    assert wait_for(lambda: sim.events[EXIT_EVENT[name]] > exits_before), sim.events
+    # no further commands are sent while in FAULT
+    sent = loop.client.counters.tx
+    time.sleep(0.05)
+    assert loop.client.counters.tx == sent
+    # re-enable once the device answers again
+    sim.silence(False)
+    assert loop.enable() is not None and loop.core.mode is DriverMode.ACTIVE
+
+
+def test_a_loop_exception_leaves_the_motor_disabled(
+    rig: tuple[str, ControlLoop, SimulatedActuator],
+) -> None:
+    name, loop, sim = rig
+    assert loop.enable() is not None
+    errors: list[BaseException] = []
+    loop.on_error = errors.append
+
+    def explode(_now: float) -> None:
+        raise RuntimeError("boom")
+
+    loop.core.command = explode  # type: ignore[method-assign]
+    loop.start()
+    assert wait_for(lambda: bool(errors))
+    assert loop.core.mode is DriverMode.FAULT and "boom" in loop.core.status.fault_reason
+    assert wait_for(lambda: sim.events[EXIT_EVENT[name]] >= 1)
+
+
+def test_network_interfaces_are_refused() -> None:
+    with pytest.raises(BusError, match="network transport"):
+        BusSettings(interface="udp_multicast", channel="224.0.0.1").open()
+    with pytest.raises(BusError, match="cannot open CAN interface 'socketcan'"):
+        BusSettings(interface="socketcan", channel="no_such_can_if").open()
