@@ -3,7 +3,7 @@
 Each case starts the real executable as its own process (what `ros2 run` does) with the
 simulated actuator, lets it warm up, then measures for --seconds:
 * the loop's own figures, read from its /diagnostics (rate, jitter p50/p99/max over the last
-  5000 cycles, overruns, missed replies);
+  5000 cycles; overruns and missed replies counted within the window);
 * /joint_states messages delivered to a subscriber in this process (drops show here).
 Every process runs on loopback with a domain ID of its own. Results: a table on stdout, JSON and
 Markdown in benchmarks/results/.
@@ -84,6 +84,7 @@ def measure(protocol: str, rate_hz: float, seconds: float, warmup_s: float) -> d
         if received[0] == 0:
             raise RuntimeError(f"{protocol} @ {rate_hz} Hz: no /joint_states within 20 s")
         time.sleep(warmup_s)
+        first = diagnostics[-1]
         start_count, start = received[0], time.monotonic()
         time.sleep(seconds)
         delivered = (received[0] - start_count) / (time.monotonic() - start)
@@ -96,6 +97,7 @@ def measure(protocol: str, rate_hz: float, seconds: float, warmup_s: float) -> d
         except subprocess.TimeoutExpired:
             proc.kill()
         executor.shutdown()
+        spinner.join(timeout=5.0)
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     return {
@@ -106,8 +108,9 @@ def measure(protocol: str, rate_hz: float, seconds: float, warmup_s: float) -> d
         "jitter_p50_us": float(last["jitter_p50_us"]),
         "jitter_p99_us": float(last["jitter_p99_us"]),
         "jitter_max_us": float(last["jitter_max_us"]),
-        "overruns": int(last["overruns"]),
-        "missed_replies": int(last["missed_replies_total"]),
+        # counted within the measurement window (diagnostics at its start and end)
+        "overruns": int(last["overruns"]) - int(first["overruns"]),
+        "missed_replies": int(last["missed_replies_total"]) - int(first["missed_replies_total"]),
         "exit_code": proc.returncode,
     }
 

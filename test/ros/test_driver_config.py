@@ -22,3 +22,11 @@ def test_every_parameter_has_a_description_and_runtime_ones_a_range_or_choices()
         if not spec.read_only and isinstance(spec.default, (int, float)):
             bounded = spec.low is not None or spec.name.startswith("position_")
             assert bounded, f"{spec.name} is changeable at runtime but has no range"
+
+
+def test_readme_documents_every_parameter() -> None:
+    from pathlib import Path  # noqa: PLC0415
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    missing = [spec.name for spec in PARAMETERS if f"`{spec.name}`" not in readme]
+    assert missing == []

@@ -126,7 +126,7 @@ def test_python_dash_m_and_console_script() -> None:
 
 
 def test_demo_produces_what_it_lists(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code, out, _ = run_cli(capsys, "demo", "--out", str(tmp_path))
+    code, out, _ = run_cli(capsys, "demo", "--out", str(tmp_path), "--no-ros")
     assert code == 0
     listed = [line.split()[0] for line in out.splitlines() if line.startswith("  " + str(tmp_path))]
     assert len(listed) == 3

@@ -31,6 +31,9 @@ def register(subparsers: Any) -> None:
         metavar="DIR",
         help="output directory (default: demo_output)",
     )
+    p.add_argument(
+        "--no-ros", action="store_true", help="skip the steps that start ROS nodes (model only)"
+    )
     p.set_defaults(func=run)
 
 
@@ -58,9 +61,46 @@ def run(args: argparse.Namespace) -> int:
             f"  {c.model.actuator:<8} {c.model.regime.value:<12} "
             f"{c.min_detectable_energy_j:>22.4g} {t_r:>16}"
         )
+    produced = [
+        (png, "Fig. 2a/2b model curves (t_r and energy loss vs collision energy)"),
+        (data, "the curves as JSON"),
+        (summary, "per-actuator model constants and minimum detectable energy"),
+    ]
+    if not args.no_ros:
+        produced += _driver_step(out)
     print("produced:")
-    print(f"  {png}  Fig. 2a/2b model curves (t_r and energy loss vs collision energy)")
-    print(f"  {data}  the curves as JSON")
-    print(f"  {summary}  per-actuator model constants and minimum detectable energy")
+    for path, what in produced:
+        print(f"  {path}  {what}")
     print(f"done in {time.perf_counter() - started:.1f} s")
     return 0
+
+
+def _driver_step(out: Path) -> list[tuple[Path, str]]:
+    """The actuator_driver node with a simulated U10DD (MIT mode) answering a step command."""
+    # ROS is imported here only: the model part of the demo runs without it.
+    from transparency_ros.ros.demo_driver import plot_step, run_driver_demo  # noqa: PLC0415
+
+    print("\ntransparency demo: actuator_driver node, simulated U10DD over MIT mode (virtual CAN)")
+    result = run_driver_demo(protocol="mit", actuator="U10DD", target_rad=1.0)
+    csv = out / "driver_step.csv"
+    lines = ["t_s,position_rad,velocity_rad_s,effort_nm"]
+    lines += [f"{t:.6f},{p:.6f},{v:.6f},{e:.6f}" for t, p, v, e in result.samples]
+    csv.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    png = plot_step(
+        result,
+        out / "driver_step.png",
+        "actuator_driver: step to 1 rad, k_s = 2 N·m/rad, simulated U10DD",
+    )
+    dead_band = load_actuators()["U10DD"].coulomb_friction_nm / 2.0  # k_s = 2 N m/rad
+    print(
+        f"  /joint_states at {result.rate_hz:.0f} Hz; position {result.final_position_rad:.3f} rad "
+        f"for a 1.000 rad command (Coulomb friction / k_s = {dead_band:.3f} rad)"
+    )
+    state = "disabled" if result.motor_disabled_at_exit else "STILL ENABLED"
+    print(f"  after SIGINT the simulated motor was {state}")
+    if not result.motor_disabled_at_exit:
+        raise RuntimeError("the driver left the simulated motor enabled:\n" + result.log_tail)
+    return [
+        (png, "actuator_driver step response (position and drive torque)"),
+        (csv, "the /joint_states samples of that step"),
+    ]
