@@ -17,89 +17,58 @@ import argparse
 import json
 import os
 import platform
-import signal
-import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from transparency_ros.rosenv import local_ros_env
+from transparency_ros.ros.harness import Listener, start_node, stop_node
 
 RESULTS = Path(__file__).parent / "results"
 
 
 def measure(protocol: str, rate_hz: float, seconds: float, warmup_s: float) -> dict[str, Any]:
-    env = local_ros_env()
-    os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
-    exe = Path(sys.executable).parent / "actuator_driver"
-    proc = subprocess.Popen(
-        [
-            str(exe),
-            "--ros-args",
-            "-p",
-            f"protocol:={protocol}",
-            "-p",
-            f"publish_rate_hz:={rate_hz}",
-            "-p",
-            "command_timeout_s:=60.0",
-            "--log-level",
-            "warn",
-        ],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = start_node(
+        "actuator_driver",
+        {"protocol": protocol, "publish_rate_hz": rate_hz, "command_timeout_s": 60.0},
+        extra=["--log-level", "warn"],
+        quiet=True,
     )
-    context = Context()
-    rclpy.init(context=context)
-    node = Node("driver_loop_bench", context=context)
     received = [0]
     diagnostics: list[dict[str, str]] = []
-    node.create_subscription(
-        JointState, "/joint_states", lambda _m: received.__setitem__(0, received[0] + 1), 1000
-    )
-    node.create_subscription(
-        DiagnosticArray,
-        "/diagnostics",
-        lambda m: diagnostics.extend({kv.key: kv.value for kv in s.values} for s in m.status),
-        10,
-    )
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
     try:
-        deadline = time.monotonic() + 20.0
-        while received[0] == 0 and time.monotonic() < deadline:
-            time.sleep(0.05)
-        if received[0] == 0:
-            raise RuntimeError(f"{protocol} @ {rate_hz} Hz: no /joint_states within 20 s")
-        time.sleep(warmup_s)
-        first = diagnostics[-1]
-        start_count, start = received[0], time.monotonic()
-        time.sleep(seconds)
-        delivered = (received[0] - start_count) / (time.monotonic() - start)
-        time.sleep(1.2)  # one more diagnostics period covering the window
-        last = diagnostics[-1]
+        with Listener("driver_loop_bench") as node:
+            node.create_subscription(
+                JointState,
+                "/joint_states",
+                lambda _m: received.__setitem__(0, received[0] + 1),
+                1000,
+            )
+            node.create_subscription(
+                DiagnosticArray,
+                "/diagnostics",
+                lambda m: diagnostics.extend(
+                    {kv.key: kv.value for kv in s.values} for s in m.status
+                ),
+                10,
+            )
+            deadline = time.monotonic() + 20.0
+            while received[0] == 0 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            if received[0] == 0:
+                raise RuntimeError(f"{protocol} @ {rate_hz} Hz: no /joint_states within 20 s")
+            time.sleep(warmup_s)
+            first = diagnostics[-1]
+            start_count, start = received[0], time.monotonic()
+            time.sleep(seconds)
+            delivered = (received[0] - start_count) / (time.monotonic() - start)
+            time.sleep(1.2)  # one more diagnostics period covering the window
+            last = diagnostics[-1]
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-        executor.shutdown()
-        spinner.join(timeout=5.0)
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        stop_node(proc)
     return {
         "protocol": protocol,
         "rate_hz": rate_hz,

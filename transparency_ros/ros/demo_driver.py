@@ -7,23 +7,13 @@ checks from its log that the simulated motor ended disabled.
 
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
-import sys
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import JointState
 
-from transparency_ros.rosenv import local_ros_env
+from transparency_ros.ros.harness import Listener, start_node, stop_node
 
 
 @dataclass(frozen=True)
@@ -39,64 +29,35 @@ class DriverDemoResult:
 def run_driver_demo(
     protocol: str = "mit", actuator: str = "U10DD", target_rad: float = 1.0, seconds: float = 2.0
 ) -> DriverDemoResult:
-    env = local_ros_env()
-    os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
-    exe = Path(sys.executable).parent / "actuator_driver"
-    proc = subprocess.Popen(
-        [
-            str(exe),
-            "--ros-args",
-            "-p",
-            f"protocol:={protocol}",
-            "-p",
-            f"sim_actuator:={actuator}",
-            "-p",
-            "command_timeout_s:=60.0",
-        ],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
+    proc = start_node(
+        "actuator_driver",
+        {"protocol": protocol, "sim_actuator": actuator, "command_timeout_s": 60.0},
     )
-    context = Context()
-    rclpy.init(context=context)
-    node = Node("transparency_demo", context=context)
     samples: list[tuple[float, float, float, float]] = []
 
     def on_state(msg: JointState) -> None:
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         samples.append((stamp, msg.position[0], msg.velocity[0], msg.effort[0]))
 
-    node.create_subscription(JointState, "/joint_states", on_state, 1000)
-    commands = node.create_publisher(JointState, "/joint_commands", 10)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
+    log = ""
     try:
-        deadline = time.monotonic() + 20.0
-        while len(samples) < 200 and time.monotonic() < deadline:
-            time.sleep(0.02)
-        if not samples:
-            raise RuntimeError("actuator_driver published no /joint_states within 20 s")
-        start = len(samples)
-        commands.publish(JointState(name=["joint"], position=[target_rad]))
-        time.sleep(seconds)
-        window = samples[start:]
-        rate = (len(window) - 1) / (window[-1][0] - window[0][0]) if len(window) > 1 else 0.0
+        with Listener("transparency_demo") as node:
+            node.create_subscription(JointState, "/joint_states", on_state, 1000)
+            commands = node.create_publisher(JointState, "/joint_commands", 10)
+            deadline = time.monotonic() + 20.0
+            while len(samples) < 200 and time.monotonic() < deadline:
+                time.sleep(0.02)
+            if not samples:
+                raise RuntimeError("actuator_driver published no /joint_states within 20 s")
+            start = len(samples)
+            commands.publish(JointState(name=["joint"], position=[target_rad]))
+            time.sleep(seconds)
+            window = samples[start:]
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            log, _ = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            log, _ = proc.communicate()
-        executor.shutdown()
-        spinner.join(timeout=5.0)
-        node.destroy_node()
-        try_shutdown(context=context)
+        log = stop_node(proc)
+    rate = (len(window) - 1) / (window[-1][0] - window[0][0]) if len(window) > 1 else 0.0
     t0 = samples[start][0]
-    trace = [(t - t0, p, v, e) for t, p, v, e in samples[start - 100 :]]
+    trace = [(t - t0, p, v, e) for t, p, v, e in samples[max(0, start - 100) :]]
     disabled = "motor enabled at exit: False" in log
     tail = "\n".join(line for line in log.splitlines() if "rosout" not in line)[-800:]
     return DriverDemoResult(rate, trace, target_rad, samples[-1][1], disabled, tail)
