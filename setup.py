@@ -28,6 +28,7 @@ setup(
         "console_scripts": [
             "transparency = transparency_ros.cli:main",
             "actuator_driver = transparency_ros.ros.actuator_driver:main",
+            "contact_estimator = transparency_ros.ros.contact_estimator:main",
         ],
     },
 )

@@ -1,0 +1,195 @@
+"""contact_estimator, launch-free with real rclpy: events, stamps, bad samples, parameters."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import WrenchStamped  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import UInt8  # noqa: E402
+
+from test.ros.conftest import Spinner, wait_for  # noqa: E402
+from transparency_ros.core.estimator import EstimatorError  # noqa: E402
+from transparency_ros.ros.actuator_driver import ActuatorDriverNode  # noqa: E402
+from transparency_ros.ros.contact_estimator import ContactEstimatorNode  # noqa: E402
+
+pytestmark = pytest.mark.ros
+_channels = itertools.count()
+
+
+class Rig:
+    def __init__(self, context: Context, **params: Any) -> None:
+        self.node = ContactEstimatorNode(
+            context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()]
+        )
+        self.probe = Node("estimator_probe", context=context)
+        self.contacts: list[WrenchStamped] = []
+        self.collisions: list[WrenchStamped] = []
+        self.releases: list[WrenchStamped] = []
+        self.estimates: list[JointState] = []
+        self.diagnostics: list[dict[str, str]] = []
+        self.states: list[int] = []
+        p = self.probe
+        p.create_subscription(WrenchStamped, "/contact", self.contacts.append, 10)
+        p.create_subscription(WrenchStamped, "/collision", self.collisions.append, 10)
+        p.create_subscription(WrenchStamped, "/contact_release", self.releases.append, 10)
+        p.create_subscription(JointState, "/estimated_effort", self.estimates.append, 100)
+        p.create_subscription(
+            DiagnosticArray,
+            "/diagnostics",
+            lambda m: self.diagnostics.extend(
+                {kv.key: kv.value for kv in s.values} for s in m.status if "estimator" in s.name
+            ),
+            10,
+        )
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        p.create_subscription(
+            UInt8, "/contact_estimator/state/arm", lambda m: self.states.append(m.data), latched
+        )
+        self.states_pub = p.create_publisher(JointState, "/joint_states", 100)
+        self.commands_pub = p.create_publisher(JointState, "/joint_commands", 10)
+        self.spinner = Spinner(context, self.node, p)
+        assert wait_for(lambda: self.states_pub.get_subscription_count() > 0)
+
+    def send(self, stamp_s: float, position: float, name: str = "arm", **extra: Any) -> None:
+        msg = JointState(name=[name], position=[position], **extra)
+        sec = math.floor(stamp_s)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = int(sec), round((stamp_s - sec) * 1e9)
+        self.states_pub.publish(msg)
+
+    def close(self) -> None:
+        self.spinner.stop()
+        self.node.destroy_node()
+        self.probe.destroy_node()
+
+
+@pytest.fixture
+def rig_factory(ros_context: Context) -> Iterator[Any]:
+    rigs: list[Rig] = []
+
+    def make(**params: Any) -> Rig:
+        rig = Rig(ros_context, **params)
+        rigs.append(rig)
+        return rig
+
+    yield make
+    for rig in rigs:
+        rig.close()
+
+
+def stamp_of(msg: Any) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def test_onset_and_release_events_carry_the_crossing_stamps(rig_factory: Any) -> None:
+    rig = rig_factory(arm_length_m=0.1, contact_onset_rad=0.1, contact_release_rad=0.05)
+    # theta_d = 0: error = -position; the 4th sample crosses 0.1 rad, the 7th falls below 0.05
+    positions = [0.0, -0.03, -0.07, -0.12, -0.15, -0.08, -0.04, -0.01]
+    for i, pos in enumerate(positions):
+        rig.send(100.0 + 0.001 * i, pos)
+    assert wait_for(lambda: len(rig.releases) == 1 and len(rig.estimates) == len(positions))
+    (onset,) = rig.contacts
+    assert stamp_of(onset) == pytest.approx(100.003, abs=1e-6)
+    assert onset.header.frame_id == "arm"
+    assert onset.wrench.torque.z == pytest.approx(2.0 * 0.12)
+    assert onset.wrench.force.z == pytest.approx(2.0 * 0.12 / 0.1)
+    assert stamp_of(rig.releases[0]) == pytest.approx(100.006, abs=1e-6)
+    assert [stamp_of(m) for m in rig.estimates] == pytest.approx(
+        [100.0 + 0.001 * i for i in range(len(positions))], abs=1e-6
+    )
+    assert rig.estimates[3].effort[0] == pytest.approx(0.24)
+    assert wait_for(lambda: rig.states[-2:] == [1, 0])  # latched state: contact, then none
+
+
+def test_collision_level_and_commanded_theta_d(rig_factory: Any) -> None:
+    rig = rig_factory(
+        contact_onset_rad=0.1,
+        contact_release_rad=0.05,
+        collision_onset_rad=0.3,
+        collision_release_rad=0.2,
+    )
+    rig.commands_pub.publish(JointState(name=["arm"], position=[1.0]))
+    assert wait_for(lambda: "arm" in rig.node.pipeline._commands)
+    for i, pos in enumerate([1.0, 0.85, 0.6, 1.0]):  # errors 0, 0.15, 0.4, 0
+        rig.send(5.0 + 0.01 * i, pos)
+    assert wait_for(lambda: len(rig.releases) == 1)
+    assert len(rig.contacts) == 1 and len(rig.collisions) == 1
+    assert stamp_of(rig.contacts[0]) == pytest.approx(5.01, abs=1e-6)
+    assert stamp_of(rig.collisions[0]) == pytest.approx(5.02, abs=1e-6)
+    assert wait_for(lambda: rig.states[-3:] == [1, 2, 0])
+
+
+def test_bad_samples_are_rejected_counted_and_the_node_goes_on(rig_factory: Any) -> None:
+    rig = rig_factory(joints=["arm"], contact_onset_rad=0.1, contact_release_rad=0.05)
+    rig.send(10.000, 0.0)
+    rig.send(10.001, math.nan)  # not finite
+    rig.send(10.002, 0.0, name="elbow")  # unknown joint
+    rig.states_pub.publish(JointState(name=["arm"], position=[0.0, 1.0]))  # length mismatch
+    rig.send(9.000, 0.0)  # stamp going backwards
+    rig.send(10.000, 0.0)  # duplicated stamp
+    rig.send(10.003, -0.2)  # valid: a contact
+    assert wait_for(lambda: len(rig.contacts) == 1)
+    rejected = rig.node.pipeline.rejected
+    assert rejected == {
+        "not_finite": 1,
+        "unknown_joint": 1,
+        "length_mismatch": 1,
+        "stamp_not_increasing": 2,
+    }
+    assert wait_for(
+        lambda: bool(rig.diagnostics) and rig.diagnostics[-1]["rejected_total"] == "5",
+        timeout_s=3.0,
+    )
+    d = rig.diagnostics[-1]
+    assert d["rejected_stamp_not_increasing"] == "2" and float(d["latency_p99_us"]) > 0
+
+
+def test_runtime_parameters_are_validated(rig_factory: Any) -> None:
+    rig = rig_factory()
+    with pytest.raises(EstimatorError, match="contact_release must satisfy"):
+        rig.node.reconfigure(contact_release_rad=0.5)
+    assert rig.node.detector_settings().contact_release == 0.05
+    rig.node.reconfigure(contact_onset_rad=0.02, contact_release_rad=0.01, k_s=4.0)
+    rig.send(1.0, -0.03)
+    assert wait_for(lambda: len(rig.contacts) == 1)
+    assert rig.contacts[0].wrench.torque.z == pytest.approx(4.0 * 0.03)
+
+
+def test_with_the_driver_the_event_stamp_is_a_joint_state_stamp(ros_context: Context) -> None:
+    driver = ActuatorDriverNode(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter("channel", value=f"estimator_e2e_{next(_channels)}"),
+            Parameter("publish_rate_hz", value=250.0),
+            Parameter("reply_timeout_s", value=0.002),
+        ],
+    )
+    rig = Rig(ros_context, contact_onset_rad=0.1, contact_release_rad=0.05)
+    driver_states: list[float] = []
+    rig.probe.create_subscription(
+        JointState, "/joint_states", lambda m: driver_states.append(stamp_of(m)), 1000
+    )
+    extra = Spinner(ros_context, driver)
+    try:
+        assert wait_for(lambda: len(driver_states) > 20)
+        rig.commands_pub.publish(JointState(name=["joint"], position=[0.5]))
+        assert wait_for(lambda: len(rig.contacts) >= 1)
+        onset = stamp_of(rig.contacts[0])
+        assert min(abs(onset - s) for s in driver_states) < 1e-9
+        assert rig.contacts[0].header.frame_id == "joint"
+    finally:
+        driver.make_safe()
+        extra.stop()
+        driver.destroy_node()
+        rig.close()

@@ -1,0 +1,140 @@
+"""Eq. (1), the Schmitt-trigger detector, the threshold helper and the momentum observer."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from transparency_ros.core.actuator_physics import (
+    ActuatorPhysics,
+    ImpedanceLaw,
+    InertialLoad,
+    PhysicsParams,
+)
+from transparency_ros.core.config import get_actuator
+from transparency_ros.core.estimator import (
+    ContactLevel,
+    DetectorSettings,
+    EstimatorError,
+    EstimatorGains,
+    EventKind,
+    SchmittDetector,
+    estimate_torque,
+    propose_thresholds,
+)
+from transparency_ros.core.momentum_observer import FrictionModel, MomentumObserver
+
+
+def test_eq1_and_the_full_estimate() -> None:
+    gains = EstimatorGains(2.0)
+    assert gains.torque(0.1, 0.0) == pytest.approx(0.2)
+    full = EstimatorGains(2.0, 0.5, 0.1)
+    assert full.torque(0.1, 0.0, 1.0, 2.0) == pytest.approx(0.2 + 0.5 * (1 - 2) - 0.1 * 2)
+    arr = estimate_torque(full, [0.1, 0.2], [0.0, 0.0], [1.0, 0.0], [2.0, 0.0])
+    assert arr.tolist() == pytest.approx([full.torque(0.1, 0, 1, 2), full.torque(0.2, 0, 0, 0)])
+    with pytest.raises(EstimatorError, match="k_s_nm_per_rad must be > 0"):
+        EstimatorGains(0.0).validated()
+
+
+def feed(det: SchmittDetector, values: list[float], dt: float = 0.001, joint: str = "j"
+         ) -> list[tuple[int, object]]:  # fmt: skip
+    out = []
+    for i, v in enumerate(values):
+        for ev in det.update(joint, i * dt, v, 2.0 * v):
+            out.append((i, ev))
+    return out
+
+
+def test_onset_is_stamped_at_the_crossing_sample_even_with_a_dwell() -> None:
+    det = SchmittDetector(DetectorSettings(0.1, 0.05, onset_dwell_s=0.003))
+    events = feed(det, [0.0, 0.05, 0.11, 0.12, 0.13, 0.14, 0.2])
+    ((i, ev),) = events
+    assert ev.kind is EventKind.CONTACT_ONSET and ev.stamp_s == pytest.approx(0.002)
+    assert i == 5 and ev.confirmed_s == pytest.approx(0.005)
+    assert det.level("j") is ContactLevel.CONTACT
+
+
+def test_a_blip_shorter_than_the_dwell_is_ignored() -> None:
+    det = SchmittDetector(DetectorSettings(0.1, 0.05, onset_dwell_s=0.003))
+    assert feed(det, [0.2, 0.2, 0.0, 0.0, 0.2, 0.0]) == []
+
+
+def test_hysteresis_and_release_dwell() -> None:
+    det = SchmittDetector(DetectorSettings(0.1, 0.05, release_dwell_s=0.002))
+    events = feed(det, [0.2, 0.08, 0.09, 0.04, 0.04, 0.2, 0.04, 0.04, 0.04])
+    kinds = [(i, ev.kind) for i, ev in events]
+    # 0.08 and 0.09 stay in contact (above release); the 0.2 at i=5 interrupts the 2 ms below
+    # 0.05 that release needs, so release comes at i=8, stamped where that run began (i=6)
+    assert kinds == [(0, EventKind.CONTACT_ONSET), (8, EventKind.RELEASE)]
+    assert events[1][1].stamp_s == pytest.approx(0.006)
+    det.reset()
+    events = feed(det, [0.2, 0.04, 0.04, 0.04])
+    assert [ev.kind for _, ev in events] == [EventKind.CONTACT_ONSET, EventKind.RELEASE]
+    assert events[1][1].stamp_s == pytest.approx(0.001)  # the first sample below the level
+
+
+def test_two_levels() -> None:
+    det = SchmittDetector(DetectorSettings(0.1, 0.05, collision_onset=0.3, collision_release=0.2))
+    events = feed(det, [0.5, 0.25, 0.15, 0.02])
+    assert [ev.kind for _, ev in events] == [
+        EventKind.CONTACT_ONSET,
+        EventKind.COLLISION_ONSET,
+        EventKind.COLLISION_RELEASE,
+        EventKind.RELEASE,
+    ]
+    assert events[1][1].level is ContactLevel.COLLISION
+
+
+def test_bias_per_joint_settings_runtime_changes_and_validation() -> None:
+    det = SchmittDetector(DetectorSettings(0.1, 0.05), {"knee": DetectorSettings(0.3, 0.1)})
+    assert feed(det, [0.2], joint="knee") == []
+    assert len(feed(det, [0.2], joint="hip")) == 1
+    det.configure("hip", bias=0.5)  # a steady error of 0.5 rad is no contact
+    det.reset("hip")
+    assert feed(det, [0.55, 0.45], joint="hip") == []
+    with pytest.raises(EstimatorError, match="contact_release must satisfy"):
+        det.configure("hip", contact_release=0.2)
+    assert det.settings_for("hip").contact_release == 0.05  # refused change not applied
+    with pytest.raises(EstimatorError, match="collision_onset"):
+        DetectorSettings(0.1, 0.05, collision_onset=0.05).validated()
+
+
+def test_threshold_proposal_follows_the_paper() -> None:
+    rng = np.random.default_rng(1)
+    quiet = 0.02 + 0.003 * np.sin(np.linspace(0, 20, 2000)) + rng.normal(0, 1e-5, 2000)
+    prop = propose_thresholds(quiet, k_s_nm_per_rad=2.0)
+    assert prop.steady_error_rad == pytest.approx(0.023, abs=2e-4)
+    assert prop.epsilon_rad == pytest.approx(0.01)  # k_s eps = 0.02 N m
+    assert prop.contact_onset_rad == pytest.approx(prop.steady_error_rad + 0.01)
+    assert prop.contact_release_rad < prop.contact_onset_rad < prop.collision_onset_rad
+    noisy = propose_thresholds(rng.normal(0, 0.01, 2000), k_s_nm_per_rad=2.0)
+    assert noisy.epsilon_rad == pytest.approx(5 * noisy.noise_std_rad)
+    with pytest.raises(EstimatorError, match=">= 10 finite"):
+        propose_thresholds([0.0, math.nan] * 6, 2.0)
+
+
+def test_momentum_observer_tracks_an_external_torque_step() -> None:
+    act = get_actuator("EC60")
+    torque_ext = 0.3
+    load = InertialLoad(6.5e-5, lambda _p, _v, t: torque_ext if t >= 0.2 else 0.0)
+    params = PhysicsParams.from_actuator(act)
+    physics = ActuatorPhysics(params, load)
+    model = FrictionModel.from_actuator(act, 6.5e-5)
+    observer = MomentumObserver(model, gain_per_s=100.0)
+    law = ImpedanceLaw(2.0, 0.0, 0.0, 0.0, 0.0)
+    residuals = []
+    t = 0.0
+    for _ in range(600):
+        physics.advance(0.001, law)
+        t += 0.001
+        residuals.append(
+            observer.update(t, physics.velocity_rad_s, physics.state.applied_torque_nm)
+        )
+    before, after = np.array(residuals[150:195]), np.array(residuals[300:])
+    assert np.all(np.abs(before) < 0.02)
+    # the shaft moves once 0.3 N m beats static friction: the residual settles near tau_ext
+    assert np.median(after) == pytest.approx(torque_ext, rel=0.15)
+    with pytest.raises(EstimatorError, match="stamps must increase"):
+        observer.update(t, 0.0, 0.0)

@@ -1,0 +1,313 @@
+"""Node ``contact_estimator``: tau_hat = k_s (theta_d - theta_a) and contact events.
+
+Subscribes /joint_states and /joint_commands (theta_d; the ``theta_d_rad`` parameter stands in
+for joints without commands). Publishes, with standard interfaces only:
+
+* /estimated_effort  sensor_msgs/JointState: effort = tau_hat, position = theta_d - theta_a,
+  header.stamp = the source sample's stamp;
+* /contact           geometry_msgs/WrenchStamped, one per contact onset: stamp = the sample that
+  crossed the threshold, frame_id = joint, torque.z = tau_hat [N m], force.z = tau_hat /
+  arm_length_m [N] when arm_length_m > 0;
+* /collision         the same, one per collision-level onset (when that level is configured);
+* /contact_release   the same, one per release (stamp = first sample back below the release
+  level);
+* ~/state/<joint>    std_msgs/UInt8, latched (transient local): 0 no contact, 1 contact,
+  2 collision, published on every change;
+* /diagnostics       rates, rejected samples by reason, processing latency, events.
+
+Bad samples are rejected and counted, never crash the node. The logic is in
+``core.estimator`` (EstimatorPipeline); this file converts messages and parameters.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections import deque
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.utilities import try_shutdown
+from sensor_msgs.msg import JointState
+from std_msgs.msg import UInt8
+from std_srvs.srv import Trigger
+
+from transparency_ros.core.estimator import (
+    ContactEvent,
+    DetectorSettings,
+    EstimatorError,
+    EstimatorGains,
+    EstimatorPipeline,
+    EventKind,
+    SampleRejectedError,
+    SchmittDetector,
+)
+from transparency_ros.ros.params import ParamSpec, choice_error, declare, parse_node_cli
+
+NODE_NAME = "contact_estimator"
+P = ParamSpec
+PARAMETERS: tuple[ParamSpec, ...] = (
+    P("joints", [""], "joint names to accept ([''] : any)", read_only=True),
+    P("theta_d_rad", 0.0, "theta_d for joints without /joint_commands [rad]"),
+    P(
+        "k_s",
+        2.0,
+        "virtual spring k_s of the impedance controller [N m/rad]",
+        low=1e-6,
+        high=1000.0,
+    ),
+    P("k_d", 0.0, "k_d term of the full estimate [N m s/rad]", low=0.0, high=100.0),
+    P(
+        "beta",
+        0.0,
+        "back-EMF term -beta theta_a' of the full estimate [N m s/rad]",
+        low=0.0,
+        high=100.0,
+    ),
+    P(
+        "contact_onset_rad",
+        0.1,
+        "|error - bias| that starts a contact (paper: 0.1 rad drop tests)",
+        low=1e-6,
+        high=10.0,
+    ),
+    P(
+        "contact_release_rad",
+        0.05,
+        "|error - bias| that ends it (below the onset)",
+        low=0.0,
+        high=10.0,
+    ),
+    P("collision_onset_rad", 0.0, "collision level (0: off)", low=0.0, high=10.0),
+    P("collision_release_rad", 0.0, "collision release level (0: off)", low=0.0, high=10.0),
+    P(
+        "onset_dwell_s",
+        0.0,
+        "time beyond the onset level before an onset is confirmed",
+        low=0.0,
+        high=10.0,
+    ),
+    P("release_dwell_s", 0.0, "time below the release level before a release", low=0.0, high=10.0),
+    P(
+        "bias_rad",
+        0.0,
+        "known steady error subtracted before thresholding [rad]",
+        low=-10.0,
+        high=10.0,
+    ),
+    P(
+        "arm_length_m",
+        0.0,
+        "contact force = tau_hat / arm_length (0: not published)",
+        low=0.0,
+        high=10.0,
+    ),
+    P("diagnostics_period_s", 1.0, "/diagnostics period [s]", read_only=True, low=0.01, high=60.0),
+)
+DETECTOR_PARAMS = {
+    "contact_onset_rad": "contact_onset", "contact_release_rad": "contact_release",
+    "collision_onset_rad": "collision_onset", "collision_release_rad": "collision_release",
+    "onset_dwell_s": "onset_dwell_s", "release_dwell_s": "release_dwell_s", "bias_rad": "bias",
+}  # fmt: skip
+GAIN_PARAMS = {"k_s": "k_s_nm_per_rad", "k_d": "k_d_nms_per_rad", "beta": "beta_nms_per_rad"}
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def detector_settings(values: dict[str, Any]) -> DetectorSettings:
+    kwargs = {field: values[name] for name, field in DETECTOR_PARAMS.items()}
+    for key in ("collision_onset", "collision_release"):
+        if kwargs[key] == 0.0:
+            kwargs[key] = math.inf
+    return DetectorSettings(**kwargs).validated()
+
+
+class ContactEstimatorNode(Node):
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.values = declare(self, PARAMETERS)
+        joints = frozenset(j for j in self.values["joints"] if j)
+        self.pipeline = EstimatorPipeline(
+            gains=EstimatorGains(**{f: self.values[n] for n, f in GAIN_PARAMS.items()}).validated(),
+            detector=SchmittDetector(detector_settings(self.values)),
+            joints=joints,
+            default_theta_d_rad=self.values["theta_d_rad"],
+        )
+        self.add_on_set_parameters_callback(self._validate)
+        self.add_post_set_parameters_callback(self._apply)
+        self._estimate_pub = self.create_publisher(JointState, "/estimated_effort", 100)
+        self._event_pubs = {
+            EventKind.CONTACT_ONSET: self.create_publisher(WrenchStamped, "/contact", 10),
+            EventKind.COLLISION_ONSET: self.create_publisher(WrenchStamped, "/collision", 10),
+            EventKind.RELEASE: self.create_publisher(WrenchStamped, "/contact_release", 10),
+        }
+        self._state_pubs: dict[str, Any] = {}
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(JointState, "/joint_states", self._on_state, 100)
+        self.create_subscription(JointState, "/joint_commands", self._on_command, 10)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_timer(self.values["diagnostics_period_s"], self._publish_diagnostics)
+        self.events_published = 0
+        self._latency_us: deque[float] = deque(maxlen=5000)
+        self._arrivals: deque[float] = deque(maxlen=5000)
+        self._last_warn_s = -math.inf
+
+    # ----------------------------------------------------------------- parameters
+
+    def _validate(self, params: list[Parameter]) -> SetParametersResult:
+        trial = dict(self.values)
+        for p in params:
+            reason = choice_error(PARAMETERS, p.name, p.value)
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
+            trial[p.name] = p.value
+        try:
+            detector_settings(trial)
+            EstimatorGains(**{f: trial[n] for n, f in GAIN_PARAMS.items()}).validated()
+        except EstimatorError as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _apply(self, params: list[Parameter]) -> None:
+        for p in params:
+            self.values[p.name] = p.value
+        self.pipeline.gains = EstimatorGains(
+            **{f: self.values[n] for n, f in GAIN_PARAMS.items()}
+        ).validated()
+        self.pipeline.detector.default = detector_settings(self.values)
+        self.pipeline.default_theta_d_rad = self.values["theta_d_rad"]
+
+    # ----------------------------------------------------------------- data
+
+    def _warn(self, text: str) -> None:
+        now = time.monotonic()
+        if now - self._last_warn_s >= 1.0:
+            self._last_warn_s = now
+            self.get_logger().warning(text)
+
+    def _on_command(self, msg: JointState) -> None:
+        try:
+            self.pipeline.command(list(msg.name), list(msg.position), list(msg.velocity))
+        except SampleRejectedError as err:
+            self._warn(f"rejected /joint_commands: {err}")
+
+    def _on_state(self, msg: JointState) -> None:
+        started = time.perf_counter()
+        self._arrivals.append(time.monotonic())
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        try:
+            estimates, events = self.pipeline.sample(
+                stamp, list(msg.name), list(msg.position), list(msg.velocity)
+            )
+        except SampleRejectedError as err:
+            self._warn(f"rejected /joint_states: {err}")
+            return
+        out = JointState()
+        out.header.stamp = msg.header.stamp
+        out.name = [e.joint for e in estimates]
+        out.position = [e.error_rad for e in estimates]
+        out.effort = [e.torque_nm for e in estimates]
+        self._estimate_pub.publish(out)
+        for event in events:
+            self._publish_event(event)
+        self._latency_us.append((time.perf_counter() - started) * 1e6)
+
+    def _publish_event(self, event: ContactEvent) -> None:
+        pub = self._event_pubs.get(event.kind)
+        if pub is not None:
+            msg = WrenchStamped()
+            sec = math.floor(event.stamp_s)
+            msg.header.stamp.sec = int(sec)
+            msg.header.stamp.nanosec = min(round((event.stamp_s - sec) * 1e9), 999_999_999)
+            msg.header.frame_id = event.joint
+            msg.wrench.torque.z = event.torque_nm
+            arm = self.values["arm_length_m"]
+            if arm > 0:
+                msg.wrench.force.z = event.torque_nm / arm
+            pub.publish(msg)
+            self.events_published += 1
+        state_pub = self._state_pubs.get(event.joint)
+        if state_pub is None:
+            state_pub = self.create_publisher(UInt8, f"~/state/{event.joint}", LATCHED)
+            self._state_pubs[event.joint] = state_pub
+        state_pub.publish(UInt8(data=int(event.level)))
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        self.pipeline.reset()
+        for pub in self._state_pubs.values():
+            pub.publish(UInt8(data=0))
+        response.success, response.message = True, "detector state and stamp history cleared"
+        return response
+
+    def _publish_diagnostics(self) -> None:
+        status = DiagnosticStatus(name=f"{NODE_NAME}: estimator", hardware_id="")
+        arrivals = np.array(self._arrivals)
+        rate = (arrivals.size - 1) / (arrivals[-1] - arrivals[0]) if arrivals.size > 2 else 0.0
+        latency = np.array(self._latency_us) if self._latency_us else np.zeros(1)
+        rejected = sum(self.pipeline.rejected.values())
+        status.level = DiagnosticStatus.WARN if rejected else DiagnosticStatus.OK
+        status.message = f"{rejected} samples rejected" if rejected else "ok"
+        values: dict[str, Any] = {
+            "joint_states_rate_hz": f"{rate:.1f}", "samples": self.pipeline.samples,
+            "rejected_total": rejected, "events_published": self.events_published,
+            "latency_p50_us": f"{np.percentile(latency, 50):.0f}",
+            "latency_p99_us": f"{np.percentile(latency, 99):.0f}",
+            "latency_max_us": f"{latency.max():.0f}",
+        }  # fmt: skip
+        values.update({f"rejected_{k}": v for k, v in sorted(self.pipeline.rejected.items())})
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(array)
+
+    def reconfigure(self, **changes: Any) -> None:
+        """Set several parameters atomically (validated together), as the parameter service's
+        set_parameters_atomically does; raise with the node's reason when refused."""
+        result = self.set_parameters_atomically([Parameter(k, value=v) for k, v in changes.items()])
+        if not result.successful:
+            raise EstimatorError(result.reason)
+
+    def detector_settings(self) -> DetectorSettings:
+        return replace(self.pipeline.detector.default)
+
+
+DESCRIPTION = (
+    "Estimate joint torque from the impedance controller's position error, tau_hat = "
+    "k_s (theta_d - theta_a) (eq. 1), and publish contact onsets (/contact, /collision), "
+    "releases (/contact_release), the contact state per joint (~/state/<joint>) and "
+    "/estimated_effort. Service ~/reset (std_srvs/Trigger)."
+)
+
+
+def main(args: list[str] | None = None) -> int:
+    parse_node_cli(NODE_NAME, DESCRIPTION, PARAMETERS, args)
+    rclpy.init(args=args)
+    node: ContactEstimatorNode | None = None
+    try:
+        node = ContactEstimatorNode()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except EstimatorError as err:
+        print(f"{NODE_NAME}: error: {err}", file=sys.stderr)  # noqa: T201
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
