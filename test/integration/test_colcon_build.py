@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-EXECUTABLES = ["transparency", "actuator_driver", "contact_estimator"]  # console_scripts of setup.py
+# the console_scripts of setup.py
+EXECUTABLES = ["transparency", "actuator_driver", "contact_estimator"]
 IGNORE = shutil.ignore_patterns(
     ".venv*",
     ".git",

@@ -12,7 +12,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 from rclpy.context import Context  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 
 
@@ -25,10 +25,15 @@ def ros_context() -> Iterator[Context]:
 
 
 class Spinner:
-    """A MultiThreadedExecutor spinning the given nodes in a background thread."""
+    """An executor spinning the given nodes in a background thread.
+
+    stop() waits until the thread has left the executor: rclpy's Node.destroy_node() busy-waits
+    (holding the GIL) while any executor still uses the node, so destroying a node whose
+    executor thread is still running deadlocks the test process.
+    """
 
     def __init__(self, context: Context, *nodes: Node) -> None:
-        self.executor = MultiThreadedExecutor(num_threads=3, context=context)
+        self.executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             self.executor.add_node(node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
@@ -40,8 +45,10 @@ class Spinner:
             self.executor.spin()
 
     def stop(self) -> None:
-        self.executor.shutdown(timeout_sec=2.0)
-        self.thread.join(timeout=2.0)
+        self.executor.shutdown(timeout_sec=10.0)
+        self.thread.join(timeout=10.0)
+        if self.thread.is_alive():
+            raise RuntimeError("executor thread still running 10 s after shutdown")
 
 
 def wait_for(condition: Callable[[], Any], timeout_s: float = 5.0, period_s: float = 0.01) -> bool:

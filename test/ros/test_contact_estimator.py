@@ -109,7 +109,14 @@ def test_onset_and_release_events_carry_the_crossing_stamps(rig_factory: Any) ->
         [100.0 + 0.001 * i for i in range(len(positions))], abs=1e-6
     )
     assert rig.estimates[3].effort[0] == pytest.approx(0.24)
-    assert wait_for(lambda: rig.states[-2:] == [1, 0])  # latched state: contact, then none
+    assert wait_for(lambda: rig.states[-1:] == [0])  # current state: no contact
+    # latched: a subscriber joining now still gets the current state
+    late: list[int] = []
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    rig.probe.create_subscription(
+        UInt8, "/contact_estimator/state/arm", lambda m: late.append(m.data), latched
+    )
+    assert wait_for(lambda: late == [0])
 
 
 def test_collision_level_and_commanded_theta_d(rig_factory: Any) -> None:
@@ -127,7 +134,7 @@ def test_collision_level_and_commanded_theta_d(rig_factory: Any) -> None:
     assert len(rig.contacts) == 1 and len(rig.collisions) == 1
     assert stamp_of(rig.contacts[0]) == pytest.approx(5.01, abs=1e-6)
     assert stamp_of(rig.collisions[0]) == pytest.approx(5.02, abs=1e-6)
-    assert wait_for(lambda: rig.states[-3:] == [1, 2, 0])
+    assert wait_for(lambda: rig.states[-1:] == [0])
 
 
 def test_bad_samples_are_rejected_counted_and_the_node_goes_on(rig_factory: Any) -> None:
