@@ -13,10 +13,10 @@ import sys
 from collections.abc import Sequence
 
 from transparency_ros import __version__
-from transparency_ros.commands import demo, model
+from transparency_ros.commands import demo, feelcage, model
 from transparency_ros.core.errors import TransparencyError
 
-SUBCOMMANDS = (model, demo)
+SUBCOMMANDS = (model, feelcage, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -51,6 +51,10 @@ class PhysicsParams:
     torque_limit_nm: float
     encoder_counts_per_rev: int
     reduction: float
+    # Position-dependent friction (gear/bearing eccentricity): b_v and tau_coul are scaled by
+    # 1 + ripple * sin(cycles * theta_out). 0 (default) is Table 1's constant friction.
+    friction_ripple: float = 0.0
+    friction_ripple_cycles_per_rev: float = 1.0
 
     def __post_init__(self) -> None:
         checks = {
@@ -61,6 +65,8 @@ class PhysicsParams:
             "torque_limit_nm": self.torque_limit_nm > 0,
             "encoder_counts_per_rev": self.encoder_counts_per_rev > 0,
             "reduction": self.reduction > 0,
+            "friction_ripple": 0.0 <= self.friction_ripple < 1.0,
+            "friction_ripple_cycles_per_rev": self.friction_ripple_cycles_per_rev > 0,
         }
         for name, ok in checks.items():
             if not ok or not math.isfinite(float(getattr(self, name))):
@@ -73,6 +79,7 @@ class PhysicsParams:
         *,
         encoder_counts_per_rev: int = 16384,
         torque_limit_nm: float | None = None,
+        friction_ripple: float = 0.0,
     ) -> PhysicsParams:
         """Table 1 values; the torque limit defaults to the actuator's peak torque."""
         return cls(
@@ -84,6 +91,7 @@ class PhysicsParams:
             torque_limit_nm=actuator.peak_torque_nm if torque_limit_nm is None else torque_limit_nm,
             encoder_counts_per_rev=encoder_counts_per_rev,
             reduction=actuator.reduction_ratio,
+            friction_ripple=friction_ripple,
         )
 
     @property
@@ -198,16 +206,25 @@ class ActuatorPhysics:
             return 0.0
         return max(-limit, min(limit, torque))
 
+    def _friction_scale(self) -> float:
+        p = self.params
+        if p.friction_ripple == 0.0:
+            return 1.0
+        angle = p.friction_ripple_cycles_per_rev * self.state.motor_position_rad
+        return 1.0 + p.friction_ripple * math.sin(angle)
+
     def _friction_step(self, omega: float, inertia: float, torque_in: float, dt: float) -> float:
         """New velocity of a body with friction under the non-friction torque ``torque_in``."""
         p = self.params
+        scale = self._friction_scale()
+        coulomb, viscous = p.coulomb_friction_nm * scale, p.viscous_nms_per_rad * scale
         if omega == 0.0:
-            if abs(torque_in) <= p.static_friction_nm:
+            if abs(torque_in) <= p.static_friction_nm * scale:
                 return 0.0
-            net = torque_in - math.copysign(p.coulomb_friction_nm, torque_in)
+            net = torque_in - math.copysign(coulomb, torque_in)
         else:
-            net = torque_in - math.copysign(p.coulomb_friction_nm, omega)
-        new = (omega + net / inertia * dt) / (1.0 + p.viscous_nms_per_rad * dt / inertia)
+            net = torque_in - math.copysign(coulomb, omega)
+        new = (omega + net / inertia * dt) / (1.0 + viscous * dt / inertia)
         if omega != 0.0 and new * omega < 0.0:
             return 0.0
         return new
