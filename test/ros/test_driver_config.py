@@ -30,3 +30,12 @@ def test_readme_documents_every_parameter() -> None:
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     missing = [spec.name for spec in PARAMETERS if f"`{spec.name}`" not in readme]
     assert missing == []
+
+
+def test_readme_documents_every_estimator_parameter() -> None:
+    from pathlib import Path  # noqa: PLC0415
+
+    from transparency_ros.ros.contact_estimator import PARAMETERS as ESTIMATOR  # noqa: PLC0415
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    assert [s.name for s in ESTIMATOR if f"`{s.name}`" not in readme] == []

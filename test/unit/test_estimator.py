@@ -138,3 +138,16 @@ def test_momentum_observer_tracks_an_external_torque_step() -> None:
     assert np.median(after) == pytest.approx(torque_ext, rel=0.15)
     with pytest.raises(EstimatorError, match="stamps must increase"):
         observer.update(t, 0.0, 0.0)
+
+
+def test_comparison_on_the_same_data() -> None:
+    """While the joint moves, the observer (given the true friction model) catches pulses the
+    position-error threshold, which must cover the tracking error, misses."""
+    from transparency_ros.analysis.estimator_comparison import compare  # noqa: PLC0415
+
+    position, observer = compare("EC60", 100.0, pulses=12, amplitude_rad=0.3)
+    assert position.unit == "rad" and observer.unit == "N m"
+    assert len(position.delays_s) + position.misses == 12
+    assert len(observer.delays_s) > len(position.delays_s)
+    assert observer.median_delay_s < 0.02
+    assert all(0 <= d <= 0.03 for d in position.delays_s + observer.delays_s)
