@@ -29,6 +29,7 @@ setup(
             "transparency = transparency_ros.cli:main",
             "actuator_driver = transparency_ros.ros.actuator_driver:main",
             "contact_estimator = transparency_ros.ros.contact_estimator:main",
+            "feel_cage_behavior = transparency_ros.ros.feel_cage_behavior:main",
         ],
     },
 )

@@ -17,7 +17,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 # the console_scripts of setup.py
-EXECUTABLES = ["transparency", "actuator_driver", "contact_estimator"]
+EXECUTABLES = ["transparency", "actuator_driver", "contact_estimator", "feel_cage_behavior"]
 IGNORE = shutil.ignore_patterns(
     ".venv*",
     ".git",

@@ -32,7 +32,7 @@ def test_parse_joint_command_picks_our_joint() -> None:
         (["a", "b"], [0.0], [], [], r"position has 1 entries for 2 joint\(s\)"),
         (["a"], [0.0], [1.0, 2.0], [], "velocity has 2 entries"),
         (["b"], [0.0], [], [], "joint 'a' not in command names"),
-        (["a"], [], [], [], "no position given"),
+        (["a"], [], [], [], "neither position nor effort given"),
         ([], [0.0, 1.0], [], [], r"position has 2 entries for 1 joint\(s\)"),
     ],
 )
@@ -116,3 +116,18 @@ def test_settings_are_validated_and_updates_atomic() -> None:
         core.update_settings(position_min_rad=20.0, k_s_nm_per_rad=5.0)
     assert core.settings.k_s_nm_per_rad == 2.0  # nothing of the refused change applied
     assert core.update_settings(k_s_nm_per_rad=5.0).k_s_nm_per_rad == 5.0
+
+
+def test_torque_commands_and_streamed_trajectories() -> None:
+    core = DriverCore(DriverSettings(k_s_nm_per_rad=2.0, torque_limit_nm=3.0))
+    core.activate(0.0)
+    target = parse_joint_command("a", ["a"], [], [], [-9.0])
+    assert target == JointTarget(None, 0.0, -9.0)
+    core.set_target(target, now_s=1.0)
+    cmd = core.command(1.0)
+    assert cmd is not None and (cmd.kp_nm_per_rad, cmd.kd_nms_per_rad) == (0.0, 0.0)
+    assert cmd.torque_ff_nm == -3.0  # clamped to the torque limit
+    # theta_d moves on with theta_d' between updates: no stair steps at the command rate
+    core.set_target(JointTarget(1.0, 2.0), now_s=2.0)
+    later = core.command(2.004)
+    assert later is not None and later.position_rad == pytest.approx(1.008)

@@ -41,7 +41,7 @@ class ControlLoop:
         *,
         rate_hz: float,
         reply_timeout_s: float,
-        on_sample: Callable[[Feedback], None] = lambda _fb: None,
+        on_sample: Callable[[Feedback, float], None] = lambda _fb, _t: None,
         on_fault: Callable[[str], None] = lambda _reason: None,
         on_error: Callable[[BaseException], None] = lambda _err: None,
         clock: Callable[[], float] = time.monotonic,
@@ -135,6 +135,7 @@ class ControlLoop:
                 self.client.protocol.command_frames(command, self.client.last_feedback)
             )
             feedback = self.client.receive(self.reply_timeout_s)
+            received_s = self.clock()
             if feedback is not None:
                 self.core.on_feedback(feedback.position_rad)
             elif self.core.on_missed_reply():
@@ -143,7 +144,7 @@ class ControlLoop:
             else:
                 return
         if feedback is not None:
-            self.on_sample(feedback)
+            self.on_sample(feedback, received_s)
         else:
             self.on_fault(reason)
 

@@ -327,6 +327,7 @@ class SimulatedActuator:
         self._thread: threading.Thread | None = None
         self._bus: can.BusABC | None = None
         self._last_s: float | None = None
+        self.start_monotonic_s = 0.0
         self.replies_sent = 0
         self.frames_received = 0
 
@@ -335,6 +336,8 @@ class SimulatedActuator:
             return self
         self._bus = self.settings.open()
         self._last_s = self.clock()
+        # physics time t corresponds to clock() = start_monotonic_s + t
+        self.start_monotonic_s = self._last_s - self.physics.state.time_s
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="simulated_actuator", daemon=True)
         self._thread.start()

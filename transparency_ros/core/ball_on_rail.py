@@ -91,6 +91,11 @@ class RailGeometry:
         return self.contact_angle_rad - self.cage_angle_rad
 
 
+def wrap_angle(phi: float) -> float:
+    """Angle into [-pi, pi): the arm passes the rail once per revolution."""
+    return (phi + math.pi) % (2.0 * math.pi) - math.pi
+
+
 @dataclass
 class BallState:
     x_m: float = 0.0  # ball centre along the rail, 0 = resting position
@@ -100,6 +105,7 @@ class BallState:
     first_contact_s: float | None = None
     max_force_n: float = 0.0
     peak_speed_m_s: float = 0.0
+    exit_s: float | None = None  # when the centre first passed the workspace exit
 
 
 @dataclass
@@ -109,15 +115,26 @@ class BallOnRail:
     ball: Ball
     geometry: RailGeometry
     state: BallState = field(default_factory=BallState)
+    placed: bool = True  # False: no ball on the rail yet (see place())
     _last_time_s: float | None = None
 
     @property
     def inertia_kgm2(self) -> float:
         return self.geometry.arm_inertia_kgm2
 
+    def place(self, theta_rad: float) -> bool:
+        """Put the ball on the rail now, if the arm is clear of it; True when placed."""
+        if self.placed:
+            return True
+        if self.tip_x(theta_rad) is not None:
+            return False
+        self.state = BallState()
+        self.placed = True
+        return True
+
     def tip_x(self, theta_rad: float) -> float | None:
         """Tip position along the rail, or None when the tip is off the rail."""
-        phi = theta_rad - self.geometry.contact_angle_rad
+        phi = wrap_angle(theta_rad - self.geometry.contact_angle_rad)
         if abs(phi) >= math.pi / 2:
             return None
         return self.geometry.arm_length_m * math.sin(phi)
@@ -126,7 +143,9 @@ class BallOnRail:
         g, b, s = self.geometry, self.ball, self.state
         dt = 0.0 if self._last_time_s is None else max(0.0, time_s - self._last_time_s)
         self._last_time_s = time_s
-        phi = position_rad - g.contact_angle_rad
+        if not self.placed:
+            return 0.0
+        phi = wrap_angle(position_rad - g.contact_angle_rad)
         force = 0.0
         x_tip = self.tip_x(position_rad)
         if x_tip is not None:
@@ -155,10 +174,12 @@ class BallOnRail:
             s.v_m_s = v
             s.x_m += v * dt
             s.peak_speed_m_s = max(s.peak_speed_m_s, abs(v))
+            if s.exit_s is None and s.x_m > g.exit_m:
+                s.exit_s = time_s
         if force == 0.0:
             return 0.0
         return -force * g.arm_length_m * math.cos(phi)
 
     @property
     def lost(self) -> bool:
-        return self.state.x_m > self.geometry.exit_m
+        return self.placed and self.state.x_m > self.geometry.exit_m

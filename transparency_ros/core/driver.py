@@ -84,7 +84,9 @@ class DriverSettings:
 
 @dataclass(frozen=True)
 class JointTarget:
-    position_rad: float
+    """theta_d, theta_d' and feed-forward; position None means pure torque (k_s = k_d = 0)."""
+
+    position_rad: float | None
     velocity_rad_s: float = 0.0
     effort_nm: float = 0.0
 
@@ -114,8 +116,9 @@ def parse_joint_command(
     """Pick our joint out of a sensor_msgs/JointState-shaped command, or say why not.
 
     Rules: with names, ours must be among them and every non-empty array has one entry per
-    name; without names, arrays hold exactly one joint. Position is required; empty velocity or
-    effort mean 0. Every value used must be finite.
+    name; without names, arrays hold exactly one joint. Empty velocity or effort mean 0. An
+    empty position with an effort is a pure torque command (the impedance gains are not used).
+    Every value used must be finite.
     """
     count = len(names) if names else 1
     for label, values in (("position", positions), ("velocity", velocities), ("effort", efforts)):
@@ -123,8 +126,8 @@ def parse_joint_command(
             raise CommandRejectedError(
                 f"{label} has {len(values)} entries for {count} joint(s) {list(names)}"
             )
-    if not positions:
-        raise CommandRejectedError("no position given")
+    if not positions and not efforts:
+        raise CommandRejectedError("neither position nor effort given")
     index = 0
     if names:
         try:
@@ -134,13 +137,13 @@ def parse_joint_command(
                 f"joint {joint_name!r} not in command names {list(names)}"
             ) from None
     target = JointTarget(
-        position_rad=float(positions[index]),
+        position_rad=float(positions[index]) if positions else None,
         velocity_rad_s=float(velocities[index]) if velocities else 0.0,
         effort_nm=float(efforts[index]) if efforts else 0.0,
     )
     for label, value in (("position", target.position_rad), ("velocity", target.velocity_rad_s),
                          ("effort", target.effort_nm)):  # fmt: skip
-        if not math.isfinite(value):
+        if value is not None and not math.isfinite(value):
             raise CommandRejectedError(f"{label} of {joint_name!r} is {value}")
     return target
 
@@ -214,7 +217,10 @@ class DriverCore:
     def set_target(self, target: JointTarget, now_s: float) -> bool:
         """Accept a validated target (clamped to the limits); True if clamping was needed."""
         s = self.settings
-        p, p_clamped = _clamp(target.position_rad, s.position_min_rad, s.position_max_rad)
+        p: float | None = None
+        p_clamped = False
+        if target.position_rad is not None:
+            p, p_clamped = _clamp(target.position_rad, s.position_min_rad, s.position_max_rad)
         v, v_clamped = _clamp(
             target.velocity_rad_s, -s.velocity_limit_rad_s, s.velocity_limit_rad_s
         )
@@ -267,12 +273,18 @@ class DriverCore:
                 return ImpedanceCommand(0.0, 0.0, 0.0, s.timeout_damping_nms_per_rad, 0.0)
             if self._timeout_hold_rad is None:
                 last = self.last_position_rad
-                self._timeout_hold_rad = last if last is not None else target.position_rad
+                fallback = target.position_rad if target.position_rad is not None else 0.0
+                self._timeout_hold_rad = last if last is not None else fallback
             return ImpedanceCommand(
                 self._timeout_hold_rad, 0.0, s.k_s_nm_per_rad, s.k_d_nms_per_rad, 0.0
             )
+        if target.position_rad is None:  # pure torque
+            return ImpedanceCommand(0.0, 0.0, 0.0, 0.0, target.effort_nm)
+        # theta_d moves on with theta_d' between command updates (streamed trajectories)
+        ahead = target.position_rad + target.velocity_rad_s * (now_s - self._target_time_s)
+        position = min(max(ahead, s.position_min_rad), s.position_max_rad)
         return ImpedanceCommand(
-            target.position_rad,
+            position,
             target.velocity_rad_s,
             s.k_s_nm_per_rad,
             s.k_d_nms_per_rad,

@@ -324,7 +324,9 @@ class JointEstimate:
 class EstimatorPipeline:
     """Samples in, estimates and contact events out; counts what it rejects, never raises on data.
 
-    theta_d comes from the latest command for the joint, else ``default_theta_d_rad``.
+    theta_d comes from the latest command for the joint, else ``default_theta_d_rad``. A stamped
+    command with a velocity is a streamed trajectory: theta_d at a sample's stamp is
+    theta_d + theta_d' (stamp - command stamp), as the driver applies it between updates.
     """
 
     gains: EstimatorGains = field(default_factory=EstimatorGains)
@@ -333,7 +335,7 @@ class EstimatorPipeline:
     default_theta_d_rad: float = 0.0
     rejected: dict[str, int] = field(default_factory=dict)
     samples: int = 0
-    _commands: dict[str, tuple[float, float]] = field(default_factory=dict)
+    _commands: dict[str, tuple[float, float, float | None]] = field(default_factory=dict)
     _last_stamp: dict[str, float] = field(default_factory=dict)
 
     def _reject(self, reason: str, detail: str) -> SampleRejectedError:
@@ -352,8 +354,9 @@ class EstimatorPipeline:
         if unknown:
             raise self._reject("unknown_joint", f"{unknown} not in {sorted(self.joints)}")
 
-    def command(self, names: list[str], positions: list[float], velocities: list[float]) -> None:
-        """A /joint_commands message: theta_d (and theta_d') per joint."""
+    def command(self, names: list[str], positions: list[float], velocities: list[float],
+                stamp_s: float | None = None) -> None:  # fmt: skip
+        """A /joint_commands message: theta_d (and theta_d') per joint, stamped or not."""
         self._check_arrays(names, {"positions": positions, "velocities": velocities})
         if not positions:
             raise self._reject("no_position", "a command needs positions")
@@ -361,7 +364,7 @@ class EstimatorPipeline:
         if not all(math.isfinite(v) for v in values):
             raise self._reject("not_finite", "NaN or inf in a command")
         for i, name in enumerate(names):
-            self._commands[name] = (positions[i], velocities[i] if velocities else 0.0)
+            self._commands[name] = (positions[i], velocities[i] if velocities else 0.0, stamp_s)
 
     def sample(
         self, stamp_s: float, names: list[str], positions: list[float], velocities: list[float]
@@ -384,7 +387,11 @@ class EstimatorPipeline:
         events: list[ContactEvent] = []
         for i, name in enumerate(names):
             self._last_stamp[name] = stamp_s
-            theta_d, theta_d_dot = self._commands.get(name, (self.default_theta_d_rad, 0.0))
+            theta_d, theta_d_dot, command_stamp = self._commands.get(
+                name, (self.default_theta_d_rad, 0.0, None)
+            )
+            if command_stamp is not None and theta_d_dot != 0.0:
+                theta_d += theta_d_dot * (stamp_s - command_stamp)
             velocity = velocities[i] if velocities else 0.0
             error = theta_d - positions[i]
             torque = self.gains.torque(theta_d, positions[i], theta_d_dot, velocity)

@@ -30,6 +30,7 @@ from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool, Trigger
 
+from transparency_ros.analysis.feelcage_sim import load_setup
 from transparency_ros.canbus import mit
 from transparency_ros.canbus.client import ActuatorClient, BusSettings
 from transparency_ros.canbus.errors import BusError, CanProtocolError
@@ -49,7 +50,8 @@ from transparency_ros.canbus.sim_device import (
     Personality,
     SimulatedActuator,
 )
-from transparency_ros.core.actuator_physics import ActuatorPhysics, PhysicsParams
+from transparency_ros.core.actuator_physics import ActuatorPhysics, Environment, PhysicsParams
+from transparency_ros.core.ball_on_rail import BallOnRail
 from transparency_ros.core.config import get_actuator
 from transparency_ros.core.driver import (
     CommandRejectedError,
@@ -122,6 +124,36 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         read_only=True,
         low=16,
         high=1 << 24,
+    ),
+    P(
+        "sim_environment",
+        "free",
+        "what the simulated output drives: free, or the feel-cage "
+        "ball_on_rail (arm, rail and ball of config/feel_cage.yaml)",
+        read_only=True,
+        choices=("free", "ball_on_rail"),
+    ),
+    P(
+        "sim_ball",
+        "rubber",
+        "ball on the rail (ball_on_rail)",
+        read_only=True,
+        choices=("rubber", "lacrosse", "bocce"),
+    ),
+    P(
+        "sim_place_ball",
+        True,
+        "ball_on_rail: ball on the rail from the start (false: place it "
+        "later, e.g. after a settling sweep)",
+        read_only=True,
+    ),
+    P(
+        "sim_friction_ripple",
+        0.0,
+        "simulated position-dependent friction (fraction, once per output revolution)",
+        read_only=True,
+        low=0.0,
+        high=0.5,
     ),
     P(
         "publish_rate_hz",
@@ -340,6 +372,13 @@ class ActuatorDriverNode(LifecycleNode):
             MoteusDevice(v["motor_id"], kp_nm_per_rev=kp, kd_nms_per_rev=kd, gear_ratio=g),
         )
 
+    def _environment(self) -> Environment | None:
+        v = self.values
+        if v["sim_environment"] != "ball_on_rail":
+            return None
+        setup = load_setup()
+        return BallOnRail(setup.balls[v["sim_ball"]], setup.geometry, placed=v["sim_place_ball"])
+
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         v = self.values
         try:
@@ -356,8 +395,11 @@ class ActuatorDriverNode(LifecycleNode):
                 actuator = get_actuator(v["sim_actuator"])
                 physics = ActuatorPhysics(
                     PhysicsParams.from_actuator(
-                        actuator, encoder_counts_per_rev=v["sim_encoder_counts_per_rev"]
-                    )
+                        actuator,
+                        encoder_counts_per_rev=v["sim_encoder_counts_per_rev"],
+                        friction_ripple=v["sim_friction_ripple"],
+                    ),
+                    self._environment(),
                 )
                 self.sim = SimulatedActuator(physics, personality, settings).start()
             self.protocol = protocol
@@ -452,9 +494,15 @@ class ActuatorDriverNode(LifecycleNode):
 
     # ----------------------------------------------------------------- data path
 
-    def _publish_sample(self, fb: Feedback) -> None:
+    def _ros_seconds_at(self, monotonic_s: float) -> float:
+        """A time.monotonic() instant on this node's ROS clock."""
+        return self.get_clock().now().nanoseconds * 1e-9 - (time.monotonic() - monotonic_s)
+
+    def _publish_sample(self, fb: Feedback, received_s: float) -> None:
         msg = JointState()
-        msg.header.stamp = self.get_clock().now().to_msg()
+        stamp = self._ros_seconds_at(received_s)  # when the reply arrived, not when published
+        msg.header.stamp.sec = int(stamp)
+        msg.header.stamp.nanosec = min(int((stamp - int(stamp)) * 1e9), 999_999_999)
         msg.name = [self.values["joint_name"]]
         msg.position = [fb.position_rad]
         msg.velocity = [fb.velocity_rad_s]
@@ -465,6 +513,13 @@ class ActuatorDriverNode(LifecycleNode):
 
     def _on_command(self, msg: JointState) -> None:
         now = time.monotonic()
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        if stamp > 0:
+            # a stamped command holds from its stamp on (streamed trajectories are extrapolated
+            # from there, so transport latency does not make the joint lag)
+            age = self.get_clock().now().nanoseconds * 1e-9 - stamp
+            if 0.0 <= age < 1.0:
+                now -= age
         try:
             target = parse_joint_command(
                 self.values["joint_name"], msg.name, msg.position, msg.velocity, msg.effort

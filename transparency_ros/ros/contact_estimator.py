@@ -196,7 +196,10 @@ class ContactEstimatorNode(Node):
 
     def _on_command(self, msg: JointState) -> None:
         try:
-            self.pipeline.command(list(msg.name), list(msg.position), list(msg.velocity))
+            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+            self.pipeline.command(
+                list(msg.name), list(msg.position), list(msg.velocity), stamp if stamp > 0 else None
+            )
         except SampleRejectedError as err:
             self._warn(f"rejected /joint_commands: {err}")
 

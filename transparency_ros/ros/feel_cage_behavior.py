@@ -1,0 +1,249 @@
+"""Node ``feel_cage_behavior``: the feel -> process -> act state machine of Sec. 4.
+
+A thin shell around ``core.feel_cage``: a timer at ``command_rate_hz`` feeds the transition
+function with the time and the latest /joint_states position and publishes its command on
+/joint_commands (sweep: theta_d and theta_d' = 1 rev/s; act: a pure torque, the actuator's
+10.5 V open-loop torque; caged: hold). /contact onsets are taken once the node is armed.
+
+Interfaces (standard types only):
+* ~/start (std_srvs/Trigger): sweep from the current position;
+* ~/arm (std_srvs/SetBool): take /contact onsets (true) or ignore them (false, e.g. while the
+  sweep settles and e_s is measured);
+* /feel_cage/phase (std_msgs/String, latched): idle, sweep, process, act, caged, lost;
+* /feel_cage/trial (diagnostic_msgs/DiagnosticStatus), at the end of a trial: message = phase,
+  values detected_stamp_s (t_e), act_start_s, done_s, t_process_s, t_act_s.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import replace
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.utilities import try_shutdown
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from std_srvs.srv import SetBool, Trigger
+
+from transparency_ros.analysis.feelcage_sim import load_setup
+from transparency_ros.core import feel_cage as fc
+from transparency_ros.core.config import get_actuator
+from transparency_ros.ros.params import ParamSpec, declare, parse_node_cli
+
+NODE_NAME = "feel_cage_behavior"
+_SETUP = load_setup()
+P = ParamSpec
+PARAMETERS: tuple[ParamSpec, ...] = (
+    P("joint_name", "joint", "joint in /joint_states and /joint_commands", read_only=True),
+    P(
+        "actuator",
+        "U10DD",
+        "Table 1 actuator: its motor model gives the act torque",
+        read_only=True,
+        choices=("U10DD", "EC60", "T2822", "U10GB"),
+    ),
+    P(
+        "act_voltage_v",
+        _SETUP.act_voltage_v,
+        "open-loop voltage of the act phase [V]",
+        read_only=True,
+        low=0.1,
+        high=48.0,
+    ),
+    P(
+        "sweep_speed_rad_s",
+        2.0 * math.pi,
+        "CCW sweep speed [rad/s] (1 rev/s)",
+        read_only=True,
+        low=0.01,
+        high=100.0,
+    ),
+    P(
+        "contact_angle_rad",
+        _SETUP.geometry.contact_angle_rad,
+        "where the rail meets the tip's circle [rad]",
+        read_only=True,
+        low=-10.0,
+        high=10.0,
+    ),
+    P(
+        "cage_angle_rad",
+        _SETUP.geometry.cage_angle_rad,
+        "CW turn from the contact angle that cages the ball [rad]",
+        read_only=True,
+        low=0.01,
+        high=6.3,
+    ),
+    P(
+        "process_time_s",
+        _SETUP.process_time_s,
+        "t_process before acting [s]",
+        read_only=True,
+        low=0.0,
+        high=1.0,
+    ),
+    P(
+        "budget_s",
+        10.0,
+        "contact -> caged budget; past it the trial is lost [s]",
+        read_only=True,
+        low=0.001,
+        high=1000.0,
+    ),
+    P(
+        "command_rate_hz",
+        1000.0,
+        "/joint_commands rate [Hz]",
+        read_only=True,
+        low=10.0,
+        high=5000.0,
+    ),
+)
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class FeelCageBehaviorNode(Node):
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.values = declare(self, PARAMETERS)
+        actuator = get_actuator(self.values["actuator"])
+        self.config = fc.FeelCageConfig(
+            sweep_speed_rad_s=self.values["sweep_speed_rad_s"],
+            act_torque_nm=fc.open_loop_torque_nm(actuator, -self.values["act_voltage_v"]),
+            cage_position_rad=self.values["contact_angle_rad"] - self.values["cage_angle_rad"],
+            process_time_s=self.values["process_time_s"],
+            budget_s=self.values["budget_s"],
+        )
+        self.state = fc.BehaviorState()
+        self.armed = False
+        self.position: float | None = None
+        self._commands = self.create_publisher(JointState, "/joint_commands", 10)
+        self._phase_pub = self.create_publisher(String, "/feel_cage/phase", LATCHED)
+        self._trial_pub = self.create_publisher(DiagnosticStatus, "/feel_cage/trial", LATCHED)
+        self.create_subscription(JointState, "/joint_states", self._on_state, 10)
+        self.create_subscription(WrenchStamped, "/contact", self._on_contact, 10)
+        self.create_service(Trigger, "~/start", self._on_start)
+        self.create_service(SetBool, "~/arm", self._on_arm)
+        self.create_timer(1.0 / self.values["command_rate_hz"], self._tick)
+        self._publish_phase()
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_state(self, msg: JointState) -> None:
+        name = self.values["joint_name"]
+        if name in msg.name and msg.position:
+            value = msg.position[list(msg.name).index(name)]
+            if math.isfinite(value):
+                self.position = value
+
+    def _on_contact(self, msg: WrenchStamped) -> None:
+        if not self.armed or msg.header.frame_id != self.values["joint_name"]:
+            return
+        before = self.state.phase
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self.state = fc.on_contact(self.state, stamp)
+        if before is fc.Phase.SWEEP and self.state.phase is fc.Phase.PROCESS:
+            # the cage angle of the revolution in which the ball was felt
+            position = self.position if self.position is not None else 0.0
+            contact = self.values["contact_angle_rad"]
+            turns = round((position - contact) / (2.0 * math.pi))
+            self.config = replace(
+                self.config,
+                cage_position_rad=contact + 2.0 * math.pi * turns - self.values["cage_angle_rad"],
+            )
+            self._publish_phase()
+
+    def _on_start(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        if self.position is None:
+            response.success, response.message = False, "no /joint_states yet"
+            return response
+        self.state = fc.start(self._now(), self.position)
+        self._publish_phase()
+        response.success, response.message = True, "sweeping"
+        return response
+
+    def _on_arm(self, request: SetBool.Request, response: SetBool.Response) -> Any:
+        self.armed = bool(request.data)
+        response.success, response.message = True, "armed" if self.armed else "disarmed"
+        return response
+
+    def _tick(self) -> None:
+        if self.position is None or self.state.phase is fc.Phase.IDLE:
+            return
+        before = self.state.phase
+        self.state, command = fc.step(self.state, self.config, self._now(), self.position)
+        if command is not None:
+            self._publish_command(command)
+        if self.state.phase is not before:
+            self._publish_phase()
+            if self.state.phase in (fc.Phase.CAGED, fc.Phase.LOST):
+                self._publish_trial()
+
+    def _publish_command(self, command: fc.Command) -> None:
+        msg = JointState(name=[self.values["joint_name"]])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        if isinstance(command, fc.Sweep):
+            msg.position, msg.velocity = [command.position_rad], [command.velocity_rad_s]
+        elif isinstance(command, fc.Torque):
+            msg.effort = [command.torque_nm]
+        else:
+            msg.position = [command.position_rad]
+        self._commands.publish(msg)
+
+    def _publish_phase(self) -> None:
+        self._phase_pub.publish(String(data=self.state.phase.value))
+
+    def _publish_trial(self) -> None:
+        s = self.state
+        values = {
+            "detected_stamp_s": s.detected_s, "act_start_s": s.act_start_s, "done_s": s.done_s,
+            "t_process_s": (s.act_start_s - s.detected_s
+                            if s.act_start_s is not None and s.detected_s is not None else None),
+            "t_act_s": (s.done_s - s.act_start_s
+                        if s.done_s is not None and s.act_start_s is not None
+                        and s.phase is fc.Phase.CAGED else None),
+        }  # fmt: skip
+        status = DiagnosticStatus(
+            name=f"{NODE_NAME}: trial", message=s.phase.value, level=DiagnosticStatus.OK
+        )
+        status.values = [
+            KeyValue(key=k, value="" if v is None else f"{v:.9f}") for k, v in values.items()
+        ]
+        self._trial_pub.publish(status)
+
+
+DESCRIPTION = (
+    "Feel -> process -> act (Sec. 4): sweep CCW at 1 rev/s, on a /contact onset wait t_process, "
+    "then turn CW open loop at 10.5 V to the cage angle. Services ~/start, ~/arm; topics "
+    "/feel_cage/phase, /feel_cage/trial."
+)
+
+
+def main(args: list[str] | None = None) -> int:
+    parse_node_cli(NODE_NAME, DESCRIPTION, PARAMETERS, args)
+    rclpy.init(args=args)
+    node: FeelCageBehaviorNode | None = None
+    try:
+        node = FeelCageBehaviorNode()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
