@@ -29,15 +29,12 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
-from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt8
 from std_srvs.srv import Trigger
@@ -52,7 +49,7 @@ from transparency_ros.core.estimator import (
     SampleRejectedError,
     SchmittDetector,
 )
-from transparency_ros.ros.params import ParamSpec, choice_error, declare, parse_node_cli
+from transparency_ros.ros.params import ParamSpec, choice_error, declare, run_node
 
 NODE_NAME = "contact_estimator"
 P = ParamSpec
@@ -292,24 +289,7 @@ DESCRIPTION = (
 
 
 def main(args: list[str] | None = None) -> int:
-    parse_node_cli(NODE_NAME, DESCRIPTION, PARAMETERS, args)
-    rclpy.init(args=args)
-    node: ContactEstimatorNode | None = None
-    try:
-        node = ContactEstimatorNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except EstimatorError as err:
-        print(f"{NODE_NAME}: error: {err}", file=sys.stderr)  # noqa: T201
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        try_shutdown()
-    return 0
+    return run_node(NODE_NAME, DESCRIPTION, PARAMETERS, ContactEstimatorNode, args)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -21,13 +21,10 @@ import sys
 from dataclasses import replace
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
-from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
@@ -35,7 +32,7 @@ from std_srvs.srv import SetBool, Trigger
 from transparency_ros.analysis.feelcage_sim import load_setup
 from transparency_ros.core import feel_cage as fc
 from transparency_ros.core.config import get_actuator
-from transparency_ros.ros.params import ParamSpec, declare, parse_node_cli
+from transparency_ros.ros.params import ParamSpec, declare, run_node
 
 NODE_NAME = "feel_cage_behavior"
 _SETUP = load_setup()
@@ -228,21 +225,7 @@ DESCRIPTION = (
 
 
 def main(args: list[str] | None = None) -> int:
-    parse_node_cli(NODE_NAME, DESCRIPTION, PARAMETERS, args)
-    rclpy.init(args=args)
-    node: FeelCageBehaviorNode | None = None
-    try:
-        node = FeelCageBehaviorNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        try_shutdown()
-    return 0
+    return run_node(NODE_NAME, DESCRIPTION, PARAMETERS, FeelCageBehaviorNode, args)
 
 
 if __name__ == "__main__":  # pragma: no cover

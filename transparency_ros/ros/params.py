@@ -9,13 +9,17 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.utilities import remove_ros_args
+from rclpy.utilities import remove_ros_args, try_shutdown
+
+from transparency_ros.core.errors import TransparencyError
 
 
 @dataclass(frozen=True)
@@ -85,3 +89,32 @@ def parse_node_cli(
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.parse_args(remove_ros_args(list(sys.argv if argv is None else argv))[1:])
+
+
+def run_node(
+    name: str,
+    description: str,
+    specs: Sequence[ParamSpec],
+    make_node: Callable[[], Node],
+    args: Sequence[str] | None,
+) -> int:
+    """``main`` of a single-threaded node, as in ros2/demos: --help, spin, clean shutdown on
+    Ctrl-C or SIGTERM, one line and status 2 for a configuration error."""
+    parse_node_cli(name, description, specs, args)
+    rclpy.init(args=None if args is None else list(args))
+    node: Node | None = None
+    try:
+        node = make_node()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except TransparencyError as err:
+        print(f"{name}: error: {err}", file=sys.stderr)  # noqa: T201
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        try_shutdown()
+    return 0
