@@ -19,10 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
-
-import yaml
 
 from transparency_ros.core import feel_cage as fc
 from transparency_ros.core.actuator_physics import (
@@ -31,57 +28,22 @@ from transparency_ros.core.actuator_physics import (
     PhysicsParams,
     PhysicsState,
 )
-from transparency_ros.core.ball_on_rail import Ball, BallOnRail, RailGeometry
+from transparency_ros.core.ball_on_rail import BallOnRail
 from transparency_ros.core.config import ActuatorParams, get_actuator
-from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.estimator import DetectorSettings, SchmittDetector
-from transparency_ros.core.resources import config_file
+from transparency_ros.core.feel_cage_config import FeelCageSetup, load_setup
 
 ACTUATORS = ("U10DD", "EC60", "T2822", "U10GB")
-
-
-@dataclass(frozen=True)
-class FeelCageSetup:
-    geometry: RailGeometry
-    balls: dict[str, Ball]
-    k_s_nm_per_rad: float = 2.0
-    epsilon_nm: float = 0.02
-    sample_rate_hz: float = 1000.0
-    process_time_s: float = 0.001
-    act_voltage_v: float = 10.5
-    friction_ripple: float = 0.0  # position-dependent friction, see PhysicsParams
-    settle_s: float = 6.0  # steady sweep before e_s is measured
-    start_before_contact_rad: float = 0.3
-    after_cage_s: float = 1.0  # keep simulating the ball to find when it would have left
-
-    @property
-    def epsilon_rad(self) -> float:
-        return self.epsilon_nm / self.k_s_nm_per_rad
-
-
-def load_setup(path: str | Path | None = None) -> FeelCageSetup:
-    source = Path(path) if path else config_file("feel_cage.yaml")
-    try:
-        data: dict[str, Any] = yaml.safe_load(source.read_text(encoding="utf-8"))
-        geometry = RailGeometry(**_numbers(data["geometry"], f"{source}: geometry"))
-        balls = {
-            name: Ball(name=name, **_numbers(values, f"{source}: balls.{name}"))
-            for name, values in data["balls"].items()
-        }
-        task = _numbers(data.get("task", {}), f"{source}: task")
-        return FeelCageSetup(geometry, balls, **task)
-    except (OSError, yaml.YAMLError, KeyError, TypeError) as err:
-        raise ConfigError(f"{source}: {err}") from err
-
-
-def _numbers(section: dict[str, Any], where: str) -> dict[str, float]:
-    out = {}
-    for key, value in section.items():
-        try:
-            out[key] = float(value)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{where}.{key}: expected a number, got {value!r}") from None
-    return out
+__all__ = [
+    "ACTUATORS",
+    "PAPER_TABLE2",
+    "FeelCageSetup",
+    "load_setup",
+    "simulate_cell",
+    "steady_sweep",
+    "table2",
+    "time_to_cage",
+]
 
 
 @dataclass(frozen=True)

@@ -91,7 +91,8 @@ class DropTestConfig:
 # --------------------------------------------------------------------------- parsing helpers
 
 
-def _number(value: Any, where: str) -> float:
+def finite_number(value: Any, where: str) -> float:
+    """A YAML value that must be a finite number (not a bool, not text); ConfigError otherwise."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ConfigError(f"{where}: expected a number, got {value!r}")
     number = float(value)
@@ -116,7 +117,7 @@ def _ratio(value: Any, where: str) -> Fraction:
         if isinstance(value, str):
             ratio = Fraction(value.replace(" ", ""))
         else:
-            ratio = Fraction(str(_number(value, where)))
+            ratio = Fraction(str(finite_number(value, where)))
     except (ValueError, ZeroDivisionError) as err:
         raise ConfigError(f"{where}: expected a number or a fraction 'a/b', got {value!r}") from err
     if ratio <= 0:
@@ -139,7 +140,7 @@ def _parse_bool(value: Any, where: str, _meta: Mapping[str, Any]) -> bool:
 def _parse_range(value: Any, where: str, _meta: Mapping[str, Any]) -> tuple[float, float]:
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise ConfigError(f"{where}: expected [low, high], got {value!r}")
-    low, high = (_number(v, f"{where}[{i}]") for i, v in enumerate(value))
+    low, high = (finite_number(v, f"{where}[{i}]") for i, v in enumerate(value))
     if not 0 < low < high:
         raise ConfigError(f"{where}: expected 0 < low < high, got {value!r}")
     return (low, high)
@@ -155,7 +156,7 @@ def _parse_per_actuator(value: Any, where: str, _meta: Mapping[str, Any]) -> dic
 
 
 def _parse_number(value: Any, where: str, meta: Mapping[str, Any]) -> float:
-    number = _number(value, where)
+    number = finite_number(value, where)
     _check_range(number, meta, where)
     return number
 

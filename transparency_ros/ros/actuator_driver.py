@@ -30,7 +30,6 @@ from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool, Trigger
 
-from transparency_ros.analysis.feelcage_sim import load_setup
 from transparency_ros.canbus import mit
 from transparency_ros.canbus.client import ActuatorClient, BusSettings
 from transparency_ros.canbus.errors import BusError, CanProtocolError
@@ -63,6 +62,7 @@ from transparency_ros.core.driver import (
     parse_joint_command,
 )
 from transparency_ros.core.errors import TransparencyError
+from transparency_ros.core.feel_cage_config import load_setup
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, parse_node_cli
 
 NODE_NAME = "actuator_driver"

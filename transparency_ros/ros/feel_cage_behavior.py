@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import sys
 from dataclasses import replace
+from functools import cache
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -29,87 +30,96 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
-from transparency_ros.analysis.feelcage_sim import load_setup
 from transparency_ros.core import feel_cage as fc
 from transparency_ros.core.config import get_actuator
+from transparency_ros.core.errors import ConfigError
+from transparency_ros.core.feel_cage_config import load_setup
 from transparency_ros.ros.params import ParamSpec, declare, run_node
 
 NODE_NAME = "feel_cage_behavior"
-_SETUP = load_setup()
 P = ParamSpec
-PARAMETERS: tuple[ParamSpec, ...] = (
-    P("joint_name", "joint", "joint in /joint_states and /joint_commands", read_only=True),
-    P(
-        "actuator",
-        "U10DD",
-        "Table 1 actuator: its motor model gives the act torque",
-        read_only=True,
-        choices=("U10DD", "EC60", "T2822", "U10GB"),
-    ),
-    P(
-        "act_voltage_v",
-        _SETUP.act_voltage_v,
-        "open-loop voltage of the act phase [V]",
-        read_only=True,
-        low=0.1,
-        high=48.0,
-    ),
-    P(
-        "sweep_speed_rad_s",
-        2.0 * math.pi,
-        "CCW sweep speed [rad/s] (1 rev/s)",
-        read_only=True,
-        low=0.01,
-        high=100.0,
-    ),
-    P(
-        "contact_angle_rad",
-        _SETUP.geometry.contact_angle_rad,
-        "where the rail meets the tip's circle [rad]",
-        read_only=True,
-        low=-10.0,
-        high=10.0,
-    ),
-    P(
-        "cage_angle_rad",
-        _SETUP.geometry.cage_angle_rad,
-        "CW turn from the contact angle that cages the ball [rad]",
-        read_only=True,
-        low=0.01,
-        high=6.3,
-    ),
-    P(
-        "process_time_s",
-        _SETUP.process_time_s,
-        "t_process before acting [s]",
-        read_only=True,
-        low=0.0,
-        high=1.0,
-    ),
-    P(
-        "budget_s",
-        10.0,
-        "contact -> caged budget; past it the trial is lost [s]",
-        read_only=True,
-        low=0.001,
-        high=1000.0,
-    ),
-    P(
-        "command_rate_hz",
-        1000.0,
-        "/joint_commands rate [Hz]",
-        read_only=True,
-        low=10.0,
-        high=5000.0,
-    ),
-)
+
+
+@cache
+def parameters() -> tuple[ParamSpec, ...]:
+    """The parameter table; defaults of the geometry and task come from config/feel_cage.yaml,
+    read on first use (not at import, so --help works and a bad file is a clear error)."""
+    _SETUP = load_setup()  # noqa: N806
+    return (
+        P("joint_name", "joint", "joint in /joint_states and /joint_commands", read_only=True),
+        P(
+            "actuator",
+            "U10DD",
+            "Table 1 actuator: its motor model gives the act torque",
+            read_only=True,
+            choices=("U10DD", "EC60", "T2822", "U10GB"),
+        ),
+        P(
+            "act_voltage_v",
+            _SETUP.act_voltage_v,
+            "open-loop voltage of the act phase [V]",
+            read_only=True,
+            low=0.1,
+            high=48.0,
+        ),
+        P(
+            "sweep_speed_rad_s",
+            2.0 * math.pi,
+            "CCW sweep speed [rad/s] (1 rev/s)",
+            read_only=True,
+            low=0.01,
+            high=100.0,
+        ),
+        P(
+            "contact_angle_rad",
+            _SETUP.geometry.contact_angle_rad,
+            "where the rail meets the tip's circle [rad]",
+            read_only=True,
+            low=-10.0,
+            high=10.0,
+        ),
+        P(
+            "cage_angle_rad",
+            _SETUP.geometry.cage_angle_rad,
+            "CW turn from the contact angle that cages the ball [rad]",
+            read_only=True,
+            low=0.01,
+            high=6.3,
+        ),
+        P(
+            "process_time_s",
+            _SETUP.process_time_s,
+            "t_process before acting [s]",
+            read_only=True,
+            low=0.0,
+            high=1.0,
+        ),
+        P(
+            "budget_s",
+            10.0,
+            "contact -> caged budget; past it the trial is lost [s]",
+            read_only=True,
+            low=0.001,
+            high=1000.0,
+        ),
+        P(
+            "command_rate_hz",
+            1000.0,
+            "/joint_commands rate [Hz]",
+            read_only=True,
+            low=10.0,
+            high=5000.0,
+        ),
+    )
+
+
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class FeelCageBehaviorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.values = declare(self, PARAMETERS)
+        self.values = declare(self, parameters())
         actuator = get_actuator(self.values["actuator"])
         self.config = fc.FeelCageConfig(
             sweep_speed_rad_s=self.values["sweep_speed_rad_s"],
@@ -225,7 +235,12 @@ DESCRIPTION = (
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(NODE_NAME, DESCRIPTION, PARAMETERS, FeelCageBehaviorNode, args)
+    try:
+        specs = parameters()
+    except ConfigError as err:
+        print(f"{NODE_NAME}: error: {err}", file=sys.stderr)  # noqa: T201
+        return 2
+    return run_node(NODE_NAME, DESCRIPTION, specs, FeelCageBehaviorNode, args)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -31,10 +31,10 @@ from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool, Trigger
 
-from transparency_ros.analysis.feelcage_sim import FeelCageSetup
 from transparency_ros.core import feel_cage as fc
 from transparency_ros.core.ball_on_rail import BallOnRail
 from transparency_ros.core.config import get_actuator
+from transparency_ros.core.feel_cage_config import FeelCageSetup
 from transparency_ros.ros.actuator_driver import ActuatorDriverNode
 from transparency_ros.ros.contact_estimator import ContactEstimatorNode
 from transparency_ros.ros.feel_cage_behavior import FeelCageBehaviorNode
