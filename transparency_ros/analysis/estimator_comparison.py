@@ -117,12 +117,12 @@ def _score(name: str, unit: str, signal: np.ndarray, threshold: float,
         for ev in detector.update("j", float(t), float(value), 0.0)
         if ev.kind.value == "contact_onset"
     ]
-    delays, misses, matched = [], 0, set()
+    delays: list[float] = []
+    misses = 0
     for start, end in rec.pulses:
         hits = [s for s in onsets if start <= s <= end]
         if hits:
             delays.append(hits[0] - start)
-            matched.update(hits)
         else:
             misses += 1
     false_alarms = sum(1 for s in onsets if not any(a <= s <= b for a, b in rec.pulses))

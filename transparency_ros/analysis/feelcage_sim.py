@@ -75,6 +75,19 @@ def steady_sweep(actuator: ActuatorParams, setup: FeelCageSetup) -> SteadySweep:
     return SteadySweep(physics.state, speed * t, max(abs(e) for e in errors))
 
 
+def _resume(physics: ActuatorPhysics, sweep: SteadySweep, output_angle_rad: float) -> float:
+    """Start ``physics`` in the steady sweep's state, turned so the output is at the given
+    angle; return the rotation applied (add it to the sweep's theta_d)."""
+    shift = output_angle_rad - sweep.state.load_position_rad
+    s, steady = physics.state, sweep.state
+    s.motor_position_rad = steady.motor_position_rad + shift
+    s.load_position_rad = steady.load_position_rad + shift
+    s.motor_velocity_rad_s = steady.motor_velocity_rad_s
+    s.load_velocity_rad_s = steady.load_velocity_rad_s
+    s.engaged_side = steady.engaged_side
+    return shift
+
+
 def simulate_cell(actuator_name: str, ball_name: str, setup: FeelCageSetup,
                   sweep: SteadySweep | None = None) -> fc.TrialRecord:  # fmt: skip
     actuator = get_actuator(actuator_name)
@@ -85,15 +98,7 @@ def simulate_cell(actuator_name: str, ball_name: str, setup: FeelCageSetup,
         PhysicsParams.from_actuator(actuator, friction_ripple=setup.friction_ripple), env
     )
     # continue the steady sweep, shifted so the arm is just before the contact angle
-    shift = (
-        geometry.contact_angle_rad - setup.start_before_contact_rad - sweep.state.load_position_rad
-    )
-    s = physics.state
-    s.motor_position_rad = sweep.state.motor_position_rad + shift
-    s.load_position_rad = sweep.state.load_position_rad + shift
-    s.motor_velocity_rad_s = sweep.state.motor_velocity_rad_s
-    s.load_velocity_rad_s = sweep.state.load_velocity_rad_s
-    s.engaged_side = sweep.state.engaged_side
+    shift = _resume(physics, sweep, geometry.contact_angle_rad - setup.start_before_contact_rad)
     theta_d0 = sweep.theta_d_rad + shift
 
     detector = SchmittDetector(
@@ -157,13 +162,7 @@ def time_to_cage(actuator_name: str, setup: FeelCageSetup,
     sweep = sweep or steady_sweep(actuator, setup)
     params = PhysicsParams.from_actuator(actuator, friction_ripple=setup.friction_ripple)
     physics = ActuatorPhysics(params, InertialLoad(setup.geometry.arm_inertia_kgm2))
-    shift = setup.geometry.contact_angle_rad - sweep.state.load_position_rad
-    s = physics.state
-    s.motor_position_rad = sweep.state.motor_position_rad + shift
-    s.load_position_rad = sweep.state.load_position_rad + shift
-    s.motor_velocity_rad_s = sweep.state.motor_velocity_rad_s
-    s.load_velocity_rad_s = sweep.state.load_velocity_rad_s
-    s.engaged_side = sweep.state.engaged_side
+    _resume(physics, sweep, setup.geometry.contact_angle_rad)
     torque = fc.open_loop_torque_nm(actuator, -setup.act_voltage_v)
     dt, t = 1.0 / setup.sample_rate_hz, 0.0
     while physics.measured_position_rad > setup.geometry.cage_position_rad and t < 5.0:
