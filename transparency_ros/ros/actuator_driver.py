@@ -63,6 +63,7 @@ from transparency_ros.core.driver import (
 )
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.feel_cage_config import load_setup
+from transparency_ros.ros.conversions import s_to_stamp, stamp_to_s
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, parse_node_cli
 
 NODE_NAME = "actuator_driver"
@@ -500,9 +501,8 @@ class ActuatorDriverNode(LifecycleNode):
 
     def _publish_sample(self, fb: Feedback, received_s: float) -> None:
         msg = JointState()
-        stamp = self._ros_seconds_at(received_s)  # when the reply arrived, not when published
-        msg.header.stamp.sec = int(stamp)
-        msg.header.stamp.nanosec = min(int((stamp - int(stamp)) * 1e9), 999_999_999)
+        # when the reply arrived, not when published
+        msg.header.stamp = s_to_stamp(self._ros_seconds_at(received_s))
         msg.name = [self.values["joint_name"]]
         msg.position = [fb.position_rad]
         msg.velocity = [fb.velocity_rad_s]
@@ -513,7 +513,7 @@ class ActuatorDriverNode(LifecycleNode):
 
     def _on_command(self, msg: JointState) -> None:
         now = time.monotonic()
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        stamp = stamp_to_s(msg.header.stamp)
         if stamp > 0:
             # a stamped command holds from its stamp on (streamed trajectories are extrapolated
             # from there, so transport latency does not make the joint lag)

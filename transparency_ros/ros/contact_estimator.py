@@ -49,6 +49,7 @@ from transparency_ros.core.estimator import (
     SampleRejectedError,
     SchmittDetector,
 )
+from transparency_ros.ros.conversions import s_to_stamp, stamp_to_s
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, run_node
 
 NODE_NAME = "contact_estimator"
@@ -193,7 +194,7 @@ class ContactEstimatorNode(Node):
 
     def _on_command(self, msg: JointState) -> None:
         try:
-            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+            stamp = stamp_to_s(msg.header.stamp)
             self.pipeline.command(
                 list(msg.name), list(msg.position), list(msg.velocity), stamp if stamp > 0 else None
             )
@@ -203,7 +204,7 @@ class ContactEstimatorNode(Node):
     def _on_state(self, msg: JointState) -> None:
         started = time.perf_counter()
         self._arrivals.append(time.monotonic())
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        stamp = stamp_to_s(msg.header.stamp)
         try:
             estimates, events = self.pipeline.sample(
                 stamp, list(msg.name), list(msg.position), list(msg.velocity)
@@ -225,9 +226,7 @@ class ContactEstimatorNode(Node):
         pub = self._event_pubs.get(event.kind)
         if pub is not None:
             msg = WrenchStamped()
-            sec = math.floor(event.stamp_s)
-            msg.header.stamp.sec = int(sec)
-            msg.header.stamp.nanosec = min(round((event.stamp_s - sec) * 1e9), 999_999_999)
+            msg.header.stamp = s_to_stamp(event.stamp_s)
             msg.header.frame_id = event.joint
             msg.wrench.torque.z = event.torque_nm
             arm = self.values["arm_length_m"]

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from sensor_msgs.msg import JointState
 
+from transparency_ros.ros.conversions import stamp_to_s
 from transparency_ros.ros.harness import Listener, start_node, stop_node
 
 
@@ -36,7 +37,7 @@ def run_driver_demo(
     samples: list[tuple[float, float, float, float]] = []
 
     def on_state(msg: JointState) -> None:
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        stamp = stamp_to_s(msg.header.stamp)
         samples.append((stamp, msg.position[0], msg.velocity[0], msg.effort[0]))
 
     log = ""

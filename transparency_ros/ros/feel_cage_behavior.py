@@ -34,6 +34,7 @@ from transparency_ros.core import feel_cage as fc
 from transparency_ros.core.config import get_actuator
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.feel_cage_config import load_setup
+from transparency_ros.ros.conversions import stamp_to_s
 from transparency_ros.ros.params import ParamSpec, declare, run_node
 
 NODE_NAME = "feel_cage_behavior"
@@ -155,7 +156,7 @@ class FeelCageBehaviorNode(Node):
         if not self.armed or msg.header.frame_id != self.values["joint_name"]:
             return
         before = self.state.phase
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        stamp = stamp_to_s(msg.header.stamp)
         self.state = fc.on_contact(self.state, stamp)
         if before is fc.Phase.SWEEP and self.state.phase is fc.Phase.PROCESS:
             # the cage angle of the revolution in which the ball was felt
