@@ -18,6 +18,7 @@ import time
 from abc import ABC, abstractmethod
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import replace
 
 import can
 
@@ -52,6 +53,15 @@ class Personality(ABC):
     def tick(self, physics: ActuatorPhysics, now_s: float) -> list[Frame]:
         """Called on idle ticks too: cyclic messages and watchdogs."""
         return []
+
+    def drive_at(self, now_s: float) -> DriveLaw:
+        """The law the firmware runs at ``now_s``; by default the last one set, held."""
+        return self.drive
+
+    @property
+    def time_varying(self) -> bool:
+        """Whether :meth:`drive_at` changes between frames (the firmware runs a trajectory)."""
+        return False
 
     @abstractmethod
     def is_enabled(self) -> bool:
@@ -223,6 +233,7 @@ class MoteusDevice(Personality):
         self.mode = moteus_fd.Mode.STOPPED
         self.registers: dict[int, float] = {}
         self._watchdog_deadline_s = math.inf
+        self._command_s = 0.0  # when the last position-mode command arrived
 
     def is_enabled(self) -> bool:
         return self.mode == moteus_fd.Mode.POSITION
@@ -244,6 +255,7 @@ class MoteusDevice(Personality):
             torque_ff_nm=r.get(moteus_fd.Reg.COMMAND_FEEDFORWARD_TORQUE, 0.0) * g,
         )
         self.drive = law
+        self._command_s = now_s
         timeout = r.get(moteus_fd.Reg.COMMAND_TIMEOUT, math.nan)
         self._watchdog_deadline_s = now_s + timeout if math.isfinite(timeout) else math.inf
 
@@ -283,6 +295,21 @@ class MoteusDevice(Personality):
         payload = moteus_fd.pad_fd(moteus_fd.encode_values(moteus_fd.REPLY, values))
         arb = moteus_fd.arbitration_id(self.device_id, source, reply=False)
         return [Frame(arb, payload, is_fd=True, is_extended_id=True)]
+
+    def drive_at(self, now_s: float) -> DriveLaw:
+        """moteus advances its control position with the commanded velocity between commands
+        (reference: control_position = command_position OR control_position + velocity dt), so
+        a late command does not leave a moving joint pulling back to a stale setpoint."""
+        law = self.drive
+        if isinstance(law, ImpedanceLaw) and law.kp > 0.0 and law.velocity_rad_s != 0.0:
+            return replace(
+                law, position_rad=law.position_rad + law.velocity_rad_s * (now_s - self._command_s)
+            )
+        return law
+
+    @property
+    def time_varying(self) -> bool:
+        return self.mode == moteus_fd.Mode.POSITION
 
     def tick(self, physics: ActuatorPhysics, now_s: float) -> list[Frame]:
         if self.mode == moteus_fd.Mode.POSITION and now_s > self._watchdog_deadline_s:
@@ -370,10 +397,18 @@ class SimulatedActuator:
         with self.lock:
             return Counter(self.personality.events)
 
-    def _advance(self, now: float) -> None:
+    def advance_to(self, now: float) -> None:
+        """Integrate up to clock time ``now`` (the device thread does so on every frame and idle
+        tick; with a controlled clock, tests call it directly)."""
         last = self._last_s if self._last_s is not None else now
-        if now > last:
-            self.physics.advance(now - last, self.personality.drive)
+        device = self.personality
+        if now > last and not device.time_varying:
+            self.physics.advance(now - last, device.drive)
+        elif now > last:  # the firmware's setpoint moves: re-evaluate it every physics step
+            steps = math.ceil((now - last) / self.physics.max_step_s)
+            dt = (now - last) / steps
+            for i in range(steps):
+                self.physics.advance(dt, device.drive_at(last + (i + 0.5) * dt))
         self._last_s = now
 
     def _run(self) -> None:
@@ -386,7 +421,7 @@ class SimulatedActuator:
                 continue
             with self.lock:
                 now = self.clock()
-                self._advance(now)
+                self.advance_to(now)
                 if msg is not None:
                     self.frames_received += 1
                 out = self.personality.handle(to_frame(msg), self.physics, now) if msg else []

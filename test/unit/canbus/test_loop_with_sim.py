@@ -26,7 +26,13 @@ from transparency_ros.canbus.sim_device import (
 )
 from transparency_ros.core.actuator_physics import ActuatorPhysics, PhysicsParams
 from transparency_ros.core.config import get_actuator
-from transparency_ros.core.driver import DriverCore, DriverMode, DriverSettings, JointTarget
+from transparency_ros.core.driver import (
+    DriverCore,
+    DriverMode,
+    DriverSettings,
+    ImpedanceCommand,
+    JointTarget,
+)
 
 _channels = itertools.count()
 EXIT_EVENT = {"mit": "exit", "odrive": "axis_state_idle", "moteus": "mode_stopped"}
@@ -131,3 +137,39 @@ def test_network_interfaces_are_refused() -> None:
         BusSettings(interface="udp_multicast", channel="224.0.0.1").open()
     with pytest.raises(BusError, match="cannot open CAN interface 'socketcan'"):
         BusSettings(interface="socketcan", channel="no_such_can_if").open()
+
+
+def test_moteus_advances_its_setpoint_with_the_commanded_velocity_between_commands() -> None:
+    """moteus firmware integrates control_position with the commanded velocity, so a joint
+    keeps tracking a moving setpoint through a gap in the command stream (MIT firmware holds)."""
+    protocol, device = MoteusProtocol(2), MoteusDevice(2)
+    physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
+    for frame in protocol.enable_frames():
+        device.handle(frame, physics, 0.0)
+    command = ImpedanceCommand(0.5, 2.0, 10.0, 0.1, 0.0)
+    for frame in protocol.command_frames(command, None):
+        device.handle(frame, physics, 1.0)
+    assert device.time_varying
+    law = device.drive_at(1.25)
+    assert law(1.0, 2.0) == pytest.approx(0.0, abs=1e-3)  # setpoint 0.5 + 2.0 * 0.25 = 1.0
+    assert law(0.5, 2.0) == pytest.approx(10.0 * 0.5, rel=1e-3)
+    for frame in protocol.disable_frames():
+        device.handle(frame, physics, 1.5)
+    assert not device.time_varying
+
+
+def test_a_gap_in_moteus_commands_does_not_stall_a_moving_joint() -> None:
+    now = [0.0]
+    protocol, device = MoteusProtocol(2), MoteusDevice(2)
+    physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
+    settings = BusSettings(channel=f"loop_test_{next(_channels)}", fd=True)
+    sim = SimulatedActuator(physics, device, settings, clock=lambda: now[0])
+    for frame in protocol.enable_frames():
+        device.handle(frame, physics, 0.0)
+    for frame in protocol.command_frames(ImpedanceCommand(0.0, 1.0, 30.0, 0.5, 0.0), None):
+        device.handle(frame, physics, 0.0)
+    sim.advance_to(0.0)
+    sim.advance_to(0.5)  # 0.5 s without a command
+    # tracks theta_d = t within the steady error of the impedance law (friction / k_s)
+    assert physics.state.motor_position_rad == pytest.approx(0.5, abs=0.08)
+    assert physics.state.motor_velocity_rad_s == pytest.approx(1.0, abs=0.1)
