@@ -46,6 +46,15 @@ def test_sweep_process_act_caged() -> None:
     assert rec.t_total_s == pytest.approx(0.045) and rec.t_budget_s is None
 
 
+def test_the_cage_closes_when_the_sample_was_taken_not_when_it_was_seen() -> None:
+    acting = fc.step(fc.on_contact(fc.start(0.0, 0.0), 0.3), CONFIG, 0.301, 1.0)[0]
+    state, _ = fc.step(acting, CONFIG, 0.345, -1.01, position_s=0.340)
+    assert state.phase is fc.Phase.CAGED and state.done_s == 0.340
+    # a stamp from the future or from before the act started is not believed
+    assert fc.step(acting, CONFIG, 0.345, -1.01, position_s=0.350)[0].done_s == 0.345
+    assert fc.step(acting, CONFIG, 0.345, -1.01, position_s=0.2)[0].done_s == 0.301
+
+
 def test_lost_before_and_after_detection() -> None:
     state = fc.start(0.0, 0.0)
     state, _ = fc.step(state, CONFIG, 0.1, 0.6, ball_lost=True)

@@ -18,6 +18,9 @@ from transparency_ros.canbus.protocol import ActuatorProtocol, Feedback, Frame
 
 # Interfaces that would leave this machine; refused so tests and demos stay on loopback.
 FORBIDDEN_INTERFACES = frozenset({"udp_multicast"})
+# A frame timestamp within this of time.time() is taken as epoch-based (socketcan, virtual);
+# interfaces with another time base (some vendor drivers count from power-up) are not used.
+EPOCH_TOLERANCE_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -28,10 +31,14 @@ class BusSettings:
     fd: bool = False
     data_bitrate: int = 0  # CAN-FD data phase; 0 = interface default
 
-    def open(self) -> can.BusABC:
+    def open(self, *, preserve_timestamps: bool = False) -> can.BusABC:
+        """Open the bus. ``preserve_timestamps`` (virtual only): frames keep the timestamp the
+        sender set (the simulated device stamps replies with the time it produced them)."""
         if self.interface in FORBIDDEN_INTERFACES:
             raise BusError(f"CAN interface {self.interface!r} is a network transport; refused")
         kwargs: dict[str, Any] = {"interface": self.interface, "channel": self.channel}
+        if preserve_timestamps and self.interface == "virtual":
+            kwargs["preserve_timestamps"] = True
         if self.interface != "virtual":
             kwargs["bitrate"] = self.bitrate
             if self.data_bitrate:
@@ -77,6 +84,7 @@ class BusCounters:
     malformed: int = 0
     other: int = 0  # frames that complete no sample: other nodes, heartbeats, partial replies
     samples: int = 0
+    late: int = 0  # replies to an earlier request (after its timeout), dropped
     last_error: str = ""
     extra: dict[str, int] = field(default_factory=dict)
 
@@ -96,6 +104,9 @@ class ActuatorClient:
         self.clock = clock
         self.counters = BusCounters()
         self.last_feedback: Feedback | None = None
+        # bus time (time.time() base) of the frame that completed the last sample, when the
+        # interface's timestamps are on that base (socketcan kernel stamps, virtual); else None
+        self.last_rx_wall_s: float | None = None
 
     def send(self, frames: Iterable[Frame]) -> bool:
         """Send every frame; False if any failed (counted, never raised)."""
@@ -113,8 +124,11 @@ class ActuatorClient:
                 ok = False
         return ok
 
-    def receive(self, timeout_s: float) -> Feedback | None:
-        """Read frames until one completes a sample, or ``timeout_s`` passes."""
+    def receive(self, timeout_s: float, *, sent_after_s: float | None = None) -> Feedback | None:
+        """Read frames until one completes a sample, or ``timeout_s`` passes.
+
+        ``sent_after_s`` (time.time() base): a sample whose frame is stamped earlier answers an
+        earlier request; it is counted as late and skipped (needs epoch-based bus timestamps)."""
         bus = self.bus
         if bus is None:
             return None
@@ -142,14 +156,20 @@ class ActuatorClient:
             if feedback is None:
                 self.counters.other += 1
                 continue
+            stamp = msg.timestamp
+            epoch = abs(stamp - time.time()) < EPOCH_TOLERANCE_S
+            if sent_after_s is not None and epoch and stamp < sent_after_s:
+                self.counters.late += 1
+                continue
             self.counters.samples += 1
             self.last_feedback = feedback
+            self.last_rx_wall_s = stamp if epoch else None
             return feedback
 
     def drain(self) -> None:
-        """Drop whatever is queued (e.g. stale replies before a new cycle)."""
+        """Drop whatever is queued (stale replies before a new cycle), counted as late."""
         while self.bus is not None and self.receive(0.0) is not None:
-            pass
+            self.counters.late += 1
 
     def close(self) -> None:
         """Shut the bus down; safe to call more than once."""

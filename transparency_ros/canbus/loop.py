@@ -1,8 +1,17 @@
 """The driver's hardware loop: one thread, one cycle per period, ROS-free.
 
-Each cycle: ask :class:`DriverCore` for a command, send it, wait up to ``reply_timeout_s`` for the
-reply, hand the sample to ``on_sample`` (the ROS node publishes it), count a missed reply
-otherwise. A tripped reply watchdog sends the protocol's disable frames at once. Deadlines are
+Each cycle: drop replies that arrived too late for the previous cycle, ask :class:`DriverCore`
+for a command, send it, wait up to ``reply_timeout_s`` for the reply, hand the sample to
+``on_sample`` (the ROS node publishes it), count a missed reply otherwise. A reply whose bus
+timestamp predates this cycle's request answers an earlier one: it is counted late and skipped.
+
+A sample's time is when the reply was on the bus (the interface's receive timestamp, e.g. the
+socketcan kernel stamp), not when this thread got to read it: a device answers within about
+0.1 ms, but reading can wait for the host's scheduler for milliseconds, and at 1 rev/s each
+millisecond is 6 mrad of apparent position error. Interfaces without epoch timestamps fall back
+to the time the request was sent.
+
+A tripped reply watchdog sends the protocol's disable frames at once. Deadlines are
 absolute (no drift); a cycle that overruns by a whole period resynchronises and is counted.
 
 The loop also measures itself: achieved rate and cycle jitter (|actual period - nominal|).
@@ -41,7 +50,7 @@ class ControlLoop:
         *,
         rate_hz: float,
         reply_timeout_s: float,
-        on_sample: Callable[[Feedback, float], None] = lambda _fb, _t: None,
+        on_sample: Callable[[Feedback, float], None] = lambda _fb, _t: None,  # (sample, time)
         on_fault: Callable[[str], None] = lambda _reason: None,
         on_error: Callable[[BaseException], None] = lambda _err: None,
         clock: Callable[[], float] = time.monotonic,
@@ -128,14 +137,19 @@ class ControlLoop:
 
     def _cycle(self) -> None:
         with self.lock:
-            command = self.core.command(self.clock())
+            self.client.drain()
+            sent_s, sent_wall_s = self.clock(), time.time()
+            command = self.core.command(sent_s)
             if command is None:
                 return
             self.client.send(
                 self.client.protocol.command_frames(command, self.client.last_feedback)
             )
-            feedback = self.client.receive(self.reply_timeout_s)
-            received_s = self.clock()
+            feedback = self.client.receive(self.reply_timeout_s, sent_after_s=sent_wall_s)
+            sample_s = sent_s
+            if feedback is not None and self.client.last_rx_wall_s is not None:
+                latency = self.client.last_rx_wall_s - sent_wall_s
+                sample_s += min(max(latency, 0.0), self.period_s)
             if feedback is not None:
                 self.core.on_feedback(feedback.position_rad)
             elif self.core.on_missed_reply():
@@ -144,7 +158,7 @@ class ControlLoop:
             else:
                 return
         if feedback is not None:
-            self.on_sample(feedback, received_s)
+            self.on_sample(feedback, sample_s)
         else:
             self.on_fault(reason)
 

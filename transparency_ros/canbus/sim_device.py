@@ -1,10 +1,13 @@
 """A simulated actuator on a python-can bus, answering exactly as the firmware does.
 
 The device has its own bus object on the channel (as a real motor has its own transceiver) and
-runs in a thread: each received frame first advances the physics to the present, then is handled
-by a *personality* (MIT, ODrive, moteus) that speaks the real wire protocol and sets the drive
-law the physics integrates between frames. Between frames the physics keeps running, idle ticks
-included. Physics: :mod:`transparency_ros.core.actuator_physics` (the one implementation).
+runs in a thread: each received frame first advances the physics to the moment the frame was
+put on the bus, then is handled by a *personality* (MIT, ODrive, moteus) that speaks the real wire
+protocol, sets the drive law the physics integrates between frames and answers with the state at
+that moment. A real device reacts within microseconds of a frame; this thread may be scheduled
+milliseconds later, and acting at the frame's bus time keeps that delay out of the physics (the
+reply is only delivered late). Between frames the physics keeps running, idle ticks included.
+Physics: :mod:`transparency_ros.core.actuator_physics` (the one implementation).
 
 Fault injection for tests (more comes with the reliability work): :meth:`SimulatedActuator.silence`
 stops all replies, as a cut cable or a dead controller would.
@@ -361,7 +364,7 @@ class SimulatedActuator:
     def start(self) -> SimulatedActuator:
         if self._thread is not None:
             return self
-        self._bus = self.settings.open()
+        self._bus = self.settings.open(preserve_timestamps=True)
         self._last_s = self.clock()
         # physics time t corresponds to clock() = start_monotonic_s + t
         self.start_monotonic_s = self._last_s - self.physics.state.time_s
@@ -421,6 +424,10 @@ class SimulatedActuator:
                 continue
             with self.lock:
                 now = self.clock()
+                if msg is not None:  # act at the frame's bus time (it may have waited for us)
+                    waited = max(0.0, time.time() - msg.timestamp)
+                    last = self._last_s if self._last_s is not None else now
+                    now = max(last, now - waited)
                 self.advance_to(now)
                 if msg is not None:
                     self.frames_received += 1
@@ -428,9 +435,12 @@ class SimulatedActuator:
                 out += self.personality.tick(self.physics, now)
             if self._silent.is_set():
                 continue
+            sent_at = time.time() - (self.clock() - now)  # the bus time of ``now``
             for frame in out:
+                message = to_message(frame)
+                message.timestamp = sent_at
                 try:
-                    bus.send(to_message(frame))
+                    bus.send(message)
                     self.replies_sent += 1
                 except (can.CanError, OSError):
                     continue

@@ -124,9 +124,14 @@ def step(
     config: FeelCageConfig,
     now_s: float,
     position_rad: float,
+    *,
     ball_lost: bool = False,
+    position_s: float | None = None,
 ) -> tuple[BehaviorState, Command | None]:
-    """Advance with the current time and arm position; return the command to send now."""
+    """Advance with the current time and arm position; return the command to send now.
+
+    ``position_s``: when the position was measured (default ``now_s``); the cage closed then,
+    not when this step got to see it, so ``done_s`` of a caged trial is that time."""
     phase = state.phase
     if phase in (Phase.IDLE, Phase.CAGED, Phase.LOST):
         return state, (Hold(position_rad) if phase is Phase.CAGED else None)
@@ -141,7 +146,9 @@ def step(
         state, phase = replace(state, phase=Phase.ACT, act_start_s=now_s), Phase.ACT
     if phase is Phase.ACT:
         if position_rad <= config.cage_position_rad:
-            return replace(state, phase=Phase.CAGED, done_s=now_s), Hold(position_rad)
+            closed = now_s if position_s is None else min(now_s, position_s)
+            closed = max(closed, state.act_start_s or closed)
+            return replace(state, phase=Phase.CAGED, done_s=closed), Hold(position_rad)
         return state, Torque(config.act_torque_nm)
     elapsed = now_s - state.start_s
     return state, Sweep(

@@ -65,6 +65,7 @@ from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.feel_cage_config import load_setup
 from transparency_ros.ros.conversions import s_to_stamp, stamp_to_s
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, parse_node_cli
+from transparency_ros.ros.sim_ball import SimBallInterface
 
 NODE_NAME = "actuator_driver"
 
@@ -288,6 +289,8 @@ class ActuatorDriverNode(LifecycleNode):
         self.create_timer(self.values["diagnostics_period_s"], self.publish_diagnostics)
         self.create_service(Trigger, "~/set_zero", self._on_set_zero)
         self.create_service(SetBool, "~/enable", self._on_enable)
+        if self.values["simulate"] and self.values["sim_environment"] == "ball_on_rail":
+            SimBallInterface(self, lambda: self.sim, self._ros_seconds_at)
         atexit.register(self.make_safe)
         # A signal shuts the context down before spin() returns: stop the hardware loop at that
         # moment (it would otherwise publish on a dead context) and leave the motor disabled.
@@ -499,10 +502,10 @@ class ActuatorDriverNode(LifecycleNode):
         """A time.monotonic() instant on this node's ROS clock."""
         return self.get_clock().now().nanoseconds * 1e-9 - (time.monotonic() - monotonic_s)
 
-    def _publish_sample(self, fb: Feedback, received_s: float) -> None:
+    def _publish_sample(self, fb: Feedback, sampled_s: float) -> None:
         msg = JointState()
-        # when the reply arrived, not when published
-        msg.header.stamp = s_to_stamp(self._ros_seconds_at(received_s))
+        # when the reply was on the bus (see canbus.loop), not when read or published
+        msg.header.stamp = s_to_stamp(self._ros_seconds_at(sampled_s))
         msg.name = [self.values["joint_name"]]
         msg.position = [fb.position_rad]
         msg.velocity = [fb.velocity_rad_s]
@@ -609,6 +612,7 @@ class ActuatorDriverNode(LifecycleNode):
                 tx_errors=c.tx_errors,
                 rx_errors=c.rx_errors,
                 timeouts=s.missed_replies_total,
+                late_replies=c.late,
                 malformed=c.malformed,
                 other_frames=c.other,
                 last_bus_error=c.last_error,

@@ -1,9 +1,13 @@
 """Node ``feel_cage_behavior``: the feel -> process -> act state machine of Sec. 4.
 
-A thin shell around ``core.feel_cage``: a timer at ``command_rate_hz`` feeds the transition
-function with the time and the latest /joint_states position and publishes its command on
-/joint_commands (sweep: theta_d and theta_d' = 1 rev/s; act: a pure torque, the actuator's
-10.5 V open-loop torque; caged: hold). /contact onsets are taken once the node is armed.
+A thin shell around ``core.feel_cage``. The transition function steps on every /joint_states
+sample (the control rate is the driver's sample rate; the act phase ends on the first sample past
+the cage angle) and on a timer at ``command_rate_hz`` (so the time budget runs out even without
+samples). Commands go to /joint_commands when their kind changes and are refreshed at
+``command_rate_hz``: sweep: stamped theta_d with theta_d' = 1 rev/s, which the driver extrapolates
+between messages; act: a pure torque, the actuator's 10.5 V open-loop torque; caged: hold.
+Streaming the sweep at a modest rate instead of once per sample leaves the CPU to the driver and
+the estimator. /contact onsets are taken once the node is armed.
 
 Interfaces (standard types only):
 * ~/start (std_srvs/Trigger): sweep from the current position;
@@ -105,10 +109,11 @@ def parameters() -> tuple[ParamSpec, ...]:
         ),
         P(
             "command_rate_hz",
-            1000.0,
-            "/joint_commands rate [Hz]",
+            50.0,
+            "/joint_commands refresh rate [Hz]; the state machine steps on every /joint_states "
+            "sample",
             read_only=True,
-            low=10.0,
+            low=1.0,
             high=5000.0,
         ),
     )
@@ -132,6 +137,10 @@ class FeelCageBehaviorNode(Node):
         self.state = fc.BehaviorState()
         self.armed = False
         self.position: float | None = None
+        self.position_s: float | None = None  # stamp of the sample (None: unstamped)
+        self._last_command: fc.Command | None = None
+        self._last_publish_s = -math.inf
+        self._refresh_s = 1.0 / self.values["command_rate_hz"]
         self._commands = self.create_publisher(JointState, "/joint_commands", 10)
         self._phase_pub = self.create_publisher(String, "/feel_cage/phase", LATCHED)
         self._trial_pub = self.create_publisher(DiagnosticStatus, "/feel_cage/trial", LATCHED)
@@ -139,7 +148,7 @@ class FeelCageBehaviorNode(Node):
         self.create_subscription(WrenchStamped, "/contact", self._on_contact, 10)
         self.create_service(Trigger, "~/start", self._on_start)
         self.create_service(SetBool, "~/arm", self._on_arm)
-        self.create_timer(1.0 / self.values["command_rate_hz"], self._tick)
+        self.create_timer(self._refresh_s, self._step)
         self._publish_phase()
 
     def _now(self) -> float:
@@ -151,6 +160,8 @@ class FeelCageBehaviorNode(Node):
             value = msg.position[list(msg.name).index(name)]
             if math.isfinite(value):
                 self.position = value
+                self.position_s = stamp_to_s(msg.header.stamp) or None
+                self._step()
 
     def _on_contact(self, msg: WrenchStamped) -> None:
         if not self.armed or msg.header.frame_id != self.values["joint_name"]:
@@ -168,12 +179,14 @@ class FeelCageBehaviorNode(Node):
                 cage_position_rad=contact + 2.0 * math.pi * turns - self.values["cage_angle_rad"],
             )
             self._publish_phase()
+            self._step()  # t_process counts from the onset stamp: it may be over already
 
     def _on_start(self, request: Trigger.Request, response: Trigger.Response) -> Any:
         if self.position is None:
             response.success, response.message = False, "no /joint_states yet"
             return response
         self.state = fc.start(self._now(), self.position)
+        self._last_command = None
         self._publish_phase()
         response.success, response.message = True, "sweeping"
         return response
@@ -183,13 +196,20 @@ class FeelCageBehaviorNode(Node):
         response.success, response.message = True, "armed" if self.armed else "disarmed"
         return response
 
-    def _tick(self) -> None:
+    def _step(self) -> None:
         if self.position is None or self.state.phase is fc.Phase.IDLE:
             return
         before = self.state.phase
-        self.state, command = fc.step(self.state, self.config, self._now(), self.position)
-        if command is not None:
+        now = self._now()
+        self.state, command = fc.step(
+            self.state, self.config, now, self.position, position_s=self.position_s
+        )
+        if command is not None and (
+            type(command) is not type(self._last_command)
+            or now - self._last_publish_s >= self._refresh_s
+        ):
             self._publish_command(command)
+            self._last_command, self._last_publish_s = command, now
         if self.state.phase is not before:
             self._publish_phase()
             if self.state.phase in (fc.Phase.CAGED, fc.Phase.LOST):

@@ -32,9 +32,13 @@ def start_node(
     *,
     extra: Sequence[str] = (),
     quiet: bool = False,
+    domain_id: int | None = None,
 ) -> subprocess.Popen[str]:
-    """Start a node of this package as a process; its output is captured (stdout and stderr)."""
-    env = local_ros_env()
+    """Start a node of this package as a process; its output is captured (stdout and stderr).
+
+    Without ``domain_id`` a free domain is picked; pass one to put several nodes on the same
+    domain. This process joins it (for a :class:`Listener` created afterwards)."""
+    env = local_ros_env(domain_id=domain_id)
     os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
     args = [str(Path(sys.executable).parent / executable), "--ros-args"]
     for name, value in parameters.items():
