@@ -156,7 +156,14 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
     phase: list[str] = []
     node.create_subscription(DiagnosticStatus, "/feel_cage/trial", trial.append, LATCHED)
     node.create_subscription(DiagnosticStatus, "/actuator_driver/sim/ball", truth.append, LATCHED)
-    node.create_subscription(String, "/feel_cage/phase", lambda m: phase.append(m.data), LATCHED)
+
+    def on_phase(msg: String) -> None:
+        phase.append(msg.data)
+
+    def on_estimate(msg: JointState) -> None:
+        errors.extend(msg.position)
+
+    node.create_subscription(String, "/feel_cage/phase", on_phase, LATCHED)
 
     def check() -> None:
         reason = died()
@@ -175,9 +182,7 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
         raise FeelCageRunError("feel_cage_behavior did not start (no /joint_states?)")
     time.sleep(max(0.0, settle_s - 1.0))
     # listen to the 1 kHz error stream only for the revolution measured (CPU for the nodes)
-    sub = node.create_subscription(
-        JointState, "/estimated_effort", lambda m: errors.extend(m.position), 1000
-    )
+    sub = node.create_subscription(JointState, "/estimated_effort", on_estimate, 1000)
     time.sleep(min(settle_s, 1.0) + 0.05)
     node.destroy_subscription(sub)
     check()
