@@ -84,7 +84,7 @@ class BusCounters:
     malformed: int = 0
     other: int = 0  # frames that complete no sample: other nodes, heartbeats, partial replies
     samples: int = 0
-    late: int = 0  # replies to an earlier request (after its timeout), dropped
+    late: int = 0  # replies that came after their cycle's timeout (still published)
     last_error: str = ""
     extra: dict[str, int] = field(default_factory=dict)
 
@@ -124,11 +124,9 @@ class ActuatorClient:
                 ok = False
         return ok
 
-    def receive(self, timeout_s: float, *, sent_after_s: float | None = None) -> Feedback | None:
-        """Read frames until one completes a sample, or ``timeout_s`` passes.
-
-        ``sent_after_s`` (time.time() base): a sample whose frame is stamped earlier answers an
-        earlier request; it is counted as late and skipped (needs epoch-based bus timestamps)."""
+    def receive(self, timeout_s: float) -> Feedback | None:
+        """Read frames until one completes a sample, or ``timeout_s`` passes. The bus time of
+        the completing frame is in :attr:`last_rx_wall_s`."""
         bus = self.bus
         if bus is None:
             return None
@@ -157,19 +155,20 @@ class ActuatorClient:
                 self.counters.other += 1
                 continue
             stamp = msg.timestamp
-            epoch = abs(stamp - time.time()) < EPOCH_TOLERANCE_S
-            if sent_after_s is not None and epoch and stamp < sent_after_s:
-                self.counters.late += 1
-                continue
             self.counters.samples += 1
             self.last_feedback = feedback
-            self.last_rx_wall_s = stamp if epoch else None
+            self.last_rx_wall_s = stamp if abs(stamp - time.time()) < EPOCH_TOLERANCE_S else None
             return feedback
 
-    def drain(self) -> None:
-        """Drop whatever is queued (stale replies before a new cycle), counted as late."""
-        while self.bus is not None and self.receive(0.0) is not None:
-            self.counters.late += 1
+    def drain(self) -> list[tuple[Feedback, float | None]]:
+        """Read whatever is queued now: samples with their bus times (None: not epoch-based)."""
+        queued: list[tuple[Feedback, float | None]] = []
+        while self.bus is not None:
+            feedback = self.receive(0.0)
+            if feedback is None:
+                break
+            queued.append((feedback, self.last_rx_wall_s))
+        return queued
 
     def close(self) -> None:
         """Shut the bus down; safe to call more than once."""

@@ -1,15 +1,16 @@
 """The driver's hardware loop: one thread, one cycle per period, ROS-free.
 
-Each cycle: drop replies that arrived too late for the previous cycle, ask :class:`DriverCore`
-for a command, send it, wait up to ``reply_timeout_s`` for the reply, hand the sample to
-``on_sample`` (the ROS node publishes it), count a missed reply otherwise. A reply whose bus
-timestamp predates this cycle's request answers an earlier one: it is counted late and skipped.
+Each cycle: ask :class:`DriverCore` for a command, send it, wait up to ``reply_timeout_s`` for
+the reply, hand the sample to ``on_sample`` (the ROS node publishes it), count a missed reply
+otherwise. A reply that comes after its cycle's timeout is still a true measurement: it is
+handed on (with its own time) in the next cycle and counted as late, never taken for the answer
+to a newer request.
 
 A sample's time is when the reply was on the bus (the interface's receive timestamp, e.g. the
 socketcan kernel stamp), not when this thread got to read it: a device answers within about
 0.1 ms, but reading can wait for the host's scheduler for milliseconds, and at 1 rev/s each
 millisecond is 6 mrad of apparent position error. Interfaces without epoch timestamps fall back
-to the time the request was sent.
+to the time the request was sent (late replies from them are dropped: their time is unknown).
 
 A tripped reply watchdog sends the protocol's disable frames at once. Deadlines are
 absolute (no drift); a cycle that overruns by a whole period resynchronises and is counted.
@@ -135,31 +136,44 @@ class ControlLoop:
 
     # ----------------------------------------------------------------- the loop
 
-    def _cycle(self) -> None:
+    def _late(self, feedback: Feedback, rx_wall_s: float | None, ref_s: float, ref_wall_s: float,
+              samples: list[tuple[Feedback, float]]) -> None:  # fmt: skip
+        """A reply that missed its cycle: hand it on at its bus time (dropped when unknown)."""
+        self.client.counters.late += 1
+        if rx_wall_s is not None and abs(rx_wall_s - ref_wall_s) < 1.0:
+            samples.append((feedback, ref_s + (rx_wall_s - ref_wall_s)))
+            self.core.on_feedback(feedback.position_rad)
+
+    def cycle(self) -> None:
+        """One cycle; the loop thread runs it every period (tests may call it directly)."""
+        samples: list[tuple[Feedback, float]] = []  # (sample, its time) in time order
+        reason = ""
         with self.lock:
-            self.client.drain()
             sent_s, sent_wall_s = self.clock(), time.time()
+            for queued, queued_rx in self.client.drain():
+                self._late(queued, queued_rx, sent_s, sent_wall_s, samples)
             command = self.core.command(sent_s)
-            if command is None:
-                return
-            self.client.send(
-                self.client.protocol.command_frames(command, self.client.last_feedback)
-            )
-            feedback = self.client.receive(self.reply_timeout_s, sent_after_s=sent_wall_s)
-            sample_s = sent_s
-            if feedback is not None and self.client.last_rx_wall_s is not None:
-                latency = self.client.last_rx_wall_s - sent_wall_s
-                sample_s += min(max(latency, 0.0), self.period_s)
-            if feedback is not None:
-                self.core.on_feedback(feedback.position_rad)
-            elif self.core.on_missed_reply():
-                self.client.send(self.client.protocol.disable_frames())
-                reason = self.core.status.fault_reason
-            else:
-                return
-        if feedback is not None:
-            self.on_sample(feedback, sample_s)
-        else:
+            if command is not None:
+                self.client.send(
+                    self.client.protocol.command_frames(command, self.client.last_feedback)
+                )
+                deadline = sent_s + self.reply_timeout_s
+                while True:
+                    feedback = self.client.receive(deadline - self.clock())
+                    rx = self.client.last_rx_wall_s
+                    if feedback is None or rx is None or rx >= sent_wall_s:
+                        break
+                    self._late(feedback, rx, sent_s, sent_wall_s, samples)  # an older request's
+                if feedback is not None:
+                    latency = 0.0 if rx is None else min(rx - sent_wall_s, self.period_s)
+                    samples.append((feedback, sent_s + latency))
+                    self.core.on_feedback(feedback.position_rad)
+                elif self.core.on_missed_reply():
+                    self.client.send(self.client.protocol.disable_frames())
+                    reason = self.core.status.fault_reason
+        for sample, at_s in samples:
+            self.on_sample(sample, at_s)
+        if reason:
             self.on_fault(reason)
 
     def _run(self) -> None:
@@ -169,7 +183,7 @@ class ControlLoop:
                 start = self.clock()
                 self._starts.append(start)
                 self.cycles += 1
-                self._cycle()
+                self.cycle()
                 deadline += self.period_s
                 remaining = deadline - self.clock()
                 if remaining < -self.period_s:

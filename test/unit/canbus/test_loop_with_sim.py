@@ -8,7 +8,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from transparency_ros.canbus.client import ActuatorClient, BusSettings
+from transparency_ros.canbus.client import ActuatorClient, BusSettings, to_message
 from transparency_ros.canbus.errors import BusError
 from transparency_ros.canbus.loop import ControlLoop
 from transparency_ros.canbus.protocol import (
@@ -173,3 +173,35 @@ def test_a_gap_in_moteus_commands_does_not_stall_a_moving_joint() -> None:
     # tracks theta_d = t within the steady error of the impedance law (friction / k_s)
     assert physics.state.motor_position_rad == pytest.approx(0.5, abs=0.08)
     assert physics.state.motor_velocity_rad_s == pytest.approx(1.0, abs=0.1)
+
+
+def test_a_late_reply_is_published_at_its_bus_time_not_taken_for_the_next_answer() -> None:
+    """A reply that missed its cycle is a true sample from the past: handed on with its own
+    bus time and counted late; the cycle that finds it still waits for its own answer."""
+    settings = BusSettings(channel=f"loop_test_{next(_channels)}", fd=True)
+    protocol, device = MoteusProtocol(2), MoteusDevice(2)
+    physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
+    device_bus = settings.open(preserve_timestamps=True)
+    client = ActuatorClient(protocol, settings.open())
+    core = DriverCore(DriverSettings(max_missed_replies=4))
+    samples: list[tuple[float, float]] = []
+    loop = ControlLoop(client, core, rate_hz=500.0, reply_timeout_s=0.001,
+                       on_sample=lambda fb, t: samples.append((fb.position_rad, t)))  # fmt: skip
+    try:
+        core.activate(0.0)
+        physics.state.motor_position_rad = 0.25
+        (reply,) = device.handle(protocol.command_frames(core.command(0.0), None)[0], physics, 0)
+        message = to_message(reply)
+        on_bus = time.monotonic() - 0.003
+        message.timestamp = time.time() - 0.003  # on the bus 3 ms ago
+        device_bus.send(message)
+        time.sleep(0.01)  # ... and read only now
+        loop.cycle()
+        assert len(samples) == 1  # the late one; this cycle's own request went unanswered
+        position, at_s = samples[0]
+        assert position == pytest.approx(0.25, abs=1e-3)
+        assert at_s == pytest.approx(on_bus, abs=0.001)
+        assert client.counters.late == 1 and core.status.missed_replies_total == 1
+    finally:
+        client.close()
+        device_bus.shutdown()
