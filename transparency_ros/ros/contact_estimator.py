@@ -212,14 +212,14 @@ class ContactEstimatorNode(Node):
         except SampleRejectedError as err:
             self._warn(f"rejected /joint_states: {err}")
             return
+        for event in events:  # first: a behavior waits for them
+            self._publish_event(event)
         out = JointState()
         out.header.stamp = msg.header.stamp
         out.name = [e.joint for e in estimates]
         out.position = [e.error_rad for e in estimates]
         out.effort = [e.torque_nm for e in estimates]
         self._estimate_pub.publish(out)
-        for event in events:
-            self._publish_event(event)
         self._latency_us.append((time.perf_counter() - started) * 1e6)
 
     def _publish_event(self, event: ContactEvent) -> None:
