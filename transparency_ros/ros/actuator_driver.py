@@ -51,7 +51,7 @@ from transparency_ros.canbus.sim_device import (
 )
 from transparency_ros.core.actuator_physics import ActuatorPhysics, Environment, PhysicsParams
 from transparency_ros.core.ball_on_rail import BallOnRail
-from transparency_ros.core.config import get_actuator
+from transparency_ros.core.config import get_actuator, load_drop_test
 from transparency_ros.core.driver import (
     CommandRejectedError,
     DriverCore,
@@ -61,11 +61,13 @@ from transparency_ros.core.driver import (
     TimeoutAction,
     parse_joint_command,
 )
+from transparency_ros.core.drop_rig import DropRig, RigParams
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.feel_cage_config import load_setup
 from transparency_ros.ros.conversions import s_to_stamp, stamp_to_s
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, parse_node_cli
 from transparency_ros.ros.sim_ball import SimBallInterface
+from transparency_ros.ros.sim_rig import SimRigInterface
 
 NODE_NAME = "actuator_driver"
 
@@ -130,10 +132,33 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     P(
         "sim_environment",
         "free",
-        "what the simulated output drives: free, or the feel-cage "
-        "ball_on_rail (arm, rail and ball of config/feel_cage.yaml)",
+        "what the simulated output drives: free, the feel-cage ball_on_rail (arm, rail and "
+        "ball of config/feel_cage.yaml) or the drop-test drop_rig (arm and falling shuttle)",
         read_only=True,
-        choices=("free", "ball_on_rail"),
+        choices=("free", "ball_on_rail", "drop_rig"),
+    ),
+    P(
+        "sim_shuttle_mass_kg",
+        0.0,
+        "drop_rig: shuttle mass [kg] (0: the paper's for sim_actuator, config/drop_test.yaml)",
+        read_only=True,
+        low=0.0,
+        high=20.0,
+    ),
+    P(
+        "sim_drop_height_m",
+        0.1,
+        "drop_rig: height of the shuttle's face above the arm tip for the next ~/sim/drop [m]",
+        low=0.001,
+        high=2.0,
+    ),
+    P(
+        "sim_rig_seed",
+        0,
+        "drop_rig: seed of the DAQ sensor noise",
+        read_only=True,
+        low=0,
+        high=2**31,
     ),
     P(
         "sim_ball",
@@ -291,6 +316,11 @@ class ActuatorDriverNode(LifecycleNode):
         self.create_service(SetBool, "~/enable", self._on_enable)
         if self.values["simulate"] and self.values["sim_environment"] == "ball_on_rail":
             SimBallInterface(self, lambda: self.sim, self._ros_seconds_at)
+        if self.values["simulate"] and self.values["sim_environment"] == "drop_rig":
+            SimRigInterface(
+                self, lambda: self.sim, self._ros_seconds_at,
+                lambda: float(self.values["sim_drop_height_m"]),
+            )  # fmt: skip
         atexit.register(self.make_safe)
         # A signal shuts the context down before spin() returns: stop the hardware loop at that
         # moment (it would otherwise publish on a dead context) and leave the motor disabled.
@@ -338,6 +368,8 @@ class ActuatorDriverNode(LifecycleNode):
         return None
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
+        for p in params:
+            self.values[p.name] = p.value
         changes = {
             RUNTIME[p.name]: _settings_value(p.name, p.value) for p in params if p.name in RUNTIME
         }
@@ -378,6 +410,17 @@ class ActuatorDriverNode(LifecycleNode):
 
     def _environment(self) -> Environment | None:
         v = self.values
+        if v["sim_environment"] == "drop_rig":
+            drop = load_drop_test()
+            mass = v["sim_shuttle_mass_kg"] or drop.shuttle_mass_for(v["sim_actuator"])
+            return DropRig(
+                RigParams(
+                    shuttle_mass_kg=mass,
+                    arm_length_m=drop.arm_length_m,
+                    arm_inertia_kgm2=drop.arm_inertia_kgm2,
+                    seed=v["sim_rig_seed"],
+                )
+            )
         if v["sim_environment"] != "ball_on_rail":
             return None
         setup = load_setup()

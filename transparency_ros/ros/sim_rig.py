@@ -1,0 +1,88 @@
+"""The simulated drop-test rig's DAQ and trigger, offered by ``actuator_driver`` over ROS.
+
+With ``sim_environment:=drop_rig`` the simulated actuator's arm is struck by a shuttle falling on
+a vertical rail (:mod:`transparency_ros.core.drop_rig`). The rig's own instruments are a DAQ, as
+in the paper (load cell and potentiometer at 10 kHz); publishing 20 000 messages a second from
+Python would starve the driver loop, so the DAQ publishes blocks, as DAQ drivers do, and
+``transparency rig`` writes them into the bag as the contract's per-sample topics:
+
+* ``~/sim/drop`` (std_srvs/Trigger): release the shuttle from ``sim_drop_height_m`` (a runtime
+  parameter) above the arm tip;
+* ``~/sim/daq`` (std_msgs/Float64MultiArray), every ``1 / rate_hz`` s while samples exist:
+  layout dim[0] ``sample`` (rows), dim[1] ``stamp_s,force_n,height_m`` (3 columns): the ROS time
+  of each 10 kHz sample, the load-cell force [N] and the height of the shuttle's contact face
+  above the arm tip at rest [m], both with the rig's sensor noise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_srvs.srv import Trigger
+
+from transparency_ros.canbus.sim_device import SimulatedActuator
+from transparency_ros.core.drop_rig import DropRig
+from transparency_ros.core.errors import ModelError
+
+DAQ_COLUMNS = ("stamp_s", "force_n", "height_m")
+
+
+class SimRigInterface:
+    def __init__(
+        self,
+        node: Node,
+        get_sim: Callable[[], SimulatedActuator | None],
+        ros_seconds_at: Callable[[float], float],
+        drop_height: Callable[[], float],
+        rate_hz: float = 100.0,
+    ) -> None:
+        self.get_sim, self.ros_seconds_at, self.drop_height = get_sim, ros_seconds_at, drop_height
+        self._pub = node.create_publisher(Float64MultiArray, "~/sim/daq", 100)
+        node.create_service(Trigger, "~/sim/drop", self._on_drop)
+        node.create_timer(1.0 / rate_hz, self.publish)
+
+    def _rig(self) -> tuple[SimulatedActuator, DropRig] | None:
+        sim = self.get_sim()
+        if sim is None or not isinstance(sim.physics.environment, DropRig):
+            return None
+        return sim, sim.physics.environment
+
+    def _on_drop(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        rig = self._rig()
+        if rig is None:
+            response.success, response.message = False, "no simulated rig (not configured)"
+            return response
+        sim, env = rig
+        height = self.drop_height()
+        try:
+            with sim.lock:
+                env.release(height)
+        except ModelError as err:
+            response.success, response.message = False, str(err)
+            return response
+        response.success, response.message = True, f"shuttle released from {height:.4f} m"
+        return response
+
+    def publish(self) -> None:
+        rig = self._rig()
+        if rig is None:
+            return
+        sim, env = rig
+        with sim.lock:
+            samples = env.take_daq()
+        if not samples:
+            return
+        msg = Float64MultiArray()
+        msg.layout.dim = [
+            MultiArrayDimension(label="sample", size=len(samples), stride=3 * len(samples)),
+            MultiArrayDimension(label=",".join(DAQ_COLUMNS), size=3, stride=3),
+        ]
+        start = sim.start_monotonic_s
+        data: list[float] = []
+        for s in samples:
+            data += [self.ros_seconds_at(start + s.time_s), s.force_n, s.height_m]
+        msg.data = data
+        self._pub.publish(msg)
