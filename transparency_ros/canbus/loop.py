@@ -20,6 +20,7 @@ The loop also measures itself: achieved rate and cycle jitter (|actual period - 
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import deque
@@ -71,6 +72,7 @@ class ControlLoop:
         self._starts: deque[float] = deque(maxlen=stats_window)
         self.cycles = 0
         self.overruns = 0
+        self._last_sample_s = -math.inf
 
     # ----------------------------------------------------------------- control
 
@@ -172,6 +174,10 @@ class ControlLoop:
                     self.client.send(self.client.protocol.disable_frames())
                     reason = self.core.status.fault_reason
         for sample, at_s in samples:
+            if at_s <= self._last_sample_s:  # never publish time going backwards
+                self.client.counters.late += 1
+                continue
+            self._last_sample_s = at_s
             self.on_sample(sample, at_s)
         if reason:
             self.on_fault(reason)

@@ -108,13 +108,20 @@ class DropRig:
     def inertia_kgm2(self) -> float:
         return self.params.arm_inertia_kgm2
 
-    def release(self, height_m: float, time_s: float | None = None) -> None:
-        """Hold the shuttle at ``height_m`` and let it go (at the next integration step)."""
+    def hold(self, height_m: float) -> None:
+        """Lift the shuttle off the arm and hold it with its face ``height_m`` above the tip."""
         if not (math.isfinite(height_m) and height_m > 0):
             raise ModelError(f"drop height must be > 0 m, got {height_m!r}")
-        self.state = ShuttleState(True, height_m, 0.0, 0.0, time_s)
+        self.state = ShuttleState(False, height_m)
         self.daq.clear()
         self._next_sample_s = None
+
+    def release(self, height_m: float | None = None) -> None:
+        """Let the shuttle go (from ``height_m`` if given, else from where it is held)."""
+        if height_m is not None or self.state.released:
+            self.hold(self.state.height_m if height_m is None else height_m)
+        self.state.released = True
+        self.state.release_s = None  # set at the next integration step
 
     def take_daq(self) -> list[DaqSample]:
         """The DAQ samples recorded since the last call."""
@@ -126,6 +133,7 @@ class DropRig:
         dt = 0.0 if self._last_time_s is None else max(0.0, time_s - self._last_time_s)
         self._last_time_s = time_s
         if not s.released:
+            self._sample(time_s)  # the DAQ runs while the shuttle is held too
             return 0.0
         if s.release_s is None:
             s.release_s = time_s

@@ -25,7 +25,6 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import Parameter as ParameterMsg
@@ -42,10 +41,10 @@ from transparency_ros.core.config import get_actuator
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.feel_cage_config import FeelCageSetup
 from transparency_ros.ros.harness import Listener, start_node, stop_node
+from transparency_ros.ros.services import ServiceCaller, wait_until
 from transparency_ros.rosenv import pick_domain_id
 
 MAX_SETTLE_REVOLUTIONS = 20
-CALL_ATTEMPT_S = 2.0
 # e_s is a maximum over a smooth revolution: a few hundred samples find it; fewer means the
 # stream is broken, not just thinned by a busy machine
 MIN_SAMPLES_PER_REVOLUTION = 200
@@ -62,40 +61,6 @@ class CellRun:
     steady_error_rad: float
     error_noise_rad: float  # std of the error over the measured revolution
     sample_rate_hz: float  # /estimated_effort samples received per second while measuring
-
-
-def _wait(condition: Callable[[], Any], timeout_s: float, poll_s: float = 0.005) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(poll_s)
-    return bool(condition())
-
-
-class _Services:
-    """Service calls with retries: rmw_fastrtps drops a response when the client's response
-    reader is not matched on the server side within 100 ms (ros2/rmw_fastrtps#390, #467), which
-    happens on a busy machine. One client per service, kept so it matches once; every request
-    made here is idempotent or harmless to repeat."""
-
-    def __init__(self, node: Node) -> None:
-        self.node = node
-        self.clients: dict[str, Any] = {}
-
-    def __call__(self, srv: Any, name: str, request: Any, timeout_s: float = 15.0) -> Any:
-        client = self.clients.get(name)
-        if client is None:
-            client = self.clients[name] = self.node.create_client(srv, name)
-        if not client.wait_for_service(timeout_sec=timeout_s):
-            raise FeelCageRunError(f"service {name} did not come up within {timeout_s:.0f} s")
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            future = client.call_async(request)
-            if _wait(future.done, min(CALL_ATTEMPT_S, max(0.0, deadline - time.monotonic()))):
-                return future.result()
-            client.remove_pending_request(future)
-        raise FeelCageRunError(f"service {name} did not answer within {timeout_s:.0f} s")
 
 
 def _double(name: str, value: float) -> ParameterMsg:
@@ -183,12 +148,9 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
 
     node.create_subscription(String, "/feel_cage/phase", on_phase, LATCHED)
 
-    call = _Services(node)
+    call = ServiceCaller(node, died)
 
-    def check() -> None:
-        reason = died()
-        if reason:
-            raise FeelCageRunError(reason)
+    check = call.check
 
     # 1. steady sweep without a ball; e_s over the last revolution
     started = False
@@ -243,7 +205,7 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
     if not result.successful:
         raise FeelCageRunError(f"contact_estimator refused the threshold: {result.reason}")
     call(Trigger, "/contact_estimator/reset", Trigger.Request())
-    placed = _wait(
+    placed = wait_until(
         lambda: call(Trigger, "/actuator_driver/sim/place_ball", Trigger.Request()).success,
         3.0,
         poll_s=0.002,
@@ -263,7 +225,7 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
         exited = latest_truth().get("exit_stamp_s", "")
         return bool(exited) and bool(phase) and phase[-1] == fc.Phase.SWEEP.value
 
-    if not _wait(finished, 10.0):
+    if not wait_until(finished, 10.0):
         raise FeelCageRunError("the trial did not end within 10 s of arming")
     # let the ball roll on after a cage to learn when it would have left (t_budget)
     time.sleep(setup.after_cage_s if trial else 0.2)

@@ -6,8 +6,9 @@ in the paper (load cell and potentiometer at 10 kHz); publishing 20 000 messages
 Python would starve the driver loop, so the DAQ publishes blocks, as DAQ drivers do, and
 ``transparency rig`` writes them into the bag as the contract's per-sample topics:
 
-* ``~/sim/drop`` (std_srvs/Trigger): release the shuttle from ``sim_drop_height_m`` (a runtime
-  parameter) above the arm tip;
+* ``~/sim/lift`` (std_srvs/Trigger): take the shuttle off the arm and hold it with its face
+  ``sim_drop_height_m`` (a runtime parameter) above the arm tip;
+* ``~/sim/drop`` (std_srvs/Trigger): let it go (lifted first if it is not held);
 * ``~/sim/daq`` (std_msgs/Float64MultiArray), every ``1 / rate_hz`` s while samples exist:
   layout dim[0] ``sample`` (rows), dim[1] ``stamp_s,force_n,height_m`` (3 columns): the ROS time
   of each 10 kHz sample, the load-cell force [N] and the height of the shuttle's contact face
@@ -41,6 +42,7 @@ class SimRigInterface:
     ) -> None:
         self.get_sim, self.ros_seconds_at, self.drop_height = get_sim, ros_seconds_at, drop_height
         self._pub = node.create_publisher(Float64MultiArray, "~/sim/daq", 100)
+        node.create_service(Trigger, "~/sim/lift", self._on_lift)
         node.create_service(Trigger, "~/sim/drop", self._on_drop)
         node.create_timer(1.0 / rate_hz, self.publish)
 
@@ -50,7 +52,13 @@ class SimRigInterface:
             return None
         return sim, sim.physics.environment
 
+    def _on_lift(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        return self._act(response, lift=True)
+
     def _on_drop(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        return self._act(response, lift=False)
+
+    def _act(self, response: Trigger.Response, *, lift: bool) -> Any:
         rig = self._rig()
         if rig is None:
             response.success, response.message = False, "no simulated rig (not configured)"
@@ -59,11 +67,18 @@ class SimRigInterface:
         height = self.drop_height()
         try:
             with sim.lock:
-                env.release(height)
+                if lift:
+                    env.hold(height)
+                elif env.state.released or env.state.height_m <= 0.0:
+                    env.release(height)  # not held: lift to the set height, then let go
+                else:
+                    env.release()  # from where it is held
+                    height = env.state.height_m
         except ModelError as err:
             response.success, response.message = False, str(err)
             return response
-        response.success, response.message = True, f"shuttle released from {height:.4f} m"
+        what = "held at" if lift else "released from"
+        response.success, response.message = True, f"shuttle {what} {height:.4f} m"
         return response
 
     def publish(self) -> None:

@@ -1,0 +1,1 @@
+"""rosbag2 read/write (rosbags, mcap) <-> arrays. No rclpy."""

@@ -1,0 +1,212 @@
+"""Drop trials through the real nodes, each recorded as a rosbag2 bag (MCAP) by the bag contract.
+
+``actuator_driver`` (simulated actuator with ``sim_environment:=drop_rig``) and
+``contact_estimator`` run as their own processes on loopback in a domain of their own. This
+process commands theta_d = 0, lifts and drops the shuttle through the driver's services and
+records /joint_states, /joint_commands, /contact, /estimated_effort as they arrive, plus the
+rig's DAQ blocks written out as the contract's 10 kHz /load_cell and /shuttle/height messages.
+
+Per trial: set ``sim_drop_height_m``, lift the shuttle (``~/sim/lift``), let the arm settle,
+reset the estimator, start recording, command theta_d = 0, drop (``~/sim/drop``), record for the
+free-fall time plus ``after_contact_s``, stop, write the bag (atomically; a bag directory that
+cannot take it is refused before the first trial).
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from transparency_ros.bag.writer import BagWriter, check_writable, message_types
+from transparency_ros.core.config import get_actuator, load_drop_test
+from transparency_ros.core.drop_rig import GRAVITY
+from transparency_ros.core.errors import TransparencyError
+from transparency_ros.ros.conversions import s_to_stamp
+from transparency_ros.ros.harness import Listener, start_node, stop_node
+from transparency_ros.ros.recorder import Recorder
+from transparency_ros.ros.services import ServiceCaller
+from transparency_ros.rosenv import pick_domain_id
+
+RECORDED = {
+    "/joint_states": JointState,
+    "/joint_commands": JointState,
+    "/contact": WrenchStamped,
+    "/estimated_effort": JointState,
+}
+DAQ_TOPIC = "/actuator_driver/sim/daq"
+
+
+class RigRunError(TransparencyError, RuntimeError):
+    """A drop trial that could not be run."""
+
+
+@dataclass(frozen=True)
+class TrialBag:
+    path: Path
+    height_m: float
+    messages: int
+
+
+def _daq_messages(blocks: list[Float64MultiArray]) -> list[tuple[str, int, Any]]:
+    """DAQ blocks -> (topic, stamp [ns], rosbags message) for /load_cell and /shuttle/height."""
+    types = message_types()
+    out: list[tuple[str, int, Any]] = []
+    for block in blocks:
+        data = block.data
+        for i in range(0, len(data) - 2, 3):
+            stamp_s, force, height = data[i], data[i + 1], data[i + 2]
+            ns = round(stamp_s * 1e9)
+            stamp = types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+            vec = types["geometry_msgs/msg/Vector3"]
+            wrench = types["geometry_msgs/msg/WrenchStamped"](
+                header=types["std_msgs/msg/Header"](stamp=stamp, frame_id="load_cell"),
+                wrench=types["geometry_msgs/msg/Wrench"](
+                    force=vec(x=0.0, y=0.0, z=float(force)), torque=vec(x=0.0, y=0.0, z=0.0)
+                ),
+            )
+            point = types["geometry_msgs/msg/PointStamped"](
+                header=types["std_msgs/msg/Header"](stamp=stamp, frame_id="rail"),
+                point=types["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=float(height)),
+            )
+            out.append(("/load_cell", ns, wrench))
+            out.append(("/shuttle/height", ns, point))
+    return out
+
+
+def run_rig(
+    actuator: str,
+    heights_m: Sequence[float],
+    out_dir: Path,
+    *,
+    trials_per_height: int = 1,
+    after_contact_s: float = 0.3,
+    seed: int = 0,
+    progress: Callable[[str], None] = lambda _text: None,
+) -> list[TrialBag]:
+    drop = load_drop_test()
+    get_actuator(actuator)  # a clear error for an unknown name
+    for h in heights_m:
+        low, high = drop.drop_height_range_m
+        if not (0.0 < h <= 2.0):
+            raise RigRunError(f"drop height {h} m out of range (the paper: {low}-{high} m)")
+    bag_dir = out_dir / actuator
+    check_writable(bag_dir)
+    domain = pick_domain_id()
+    k_s, threshold = drop.k_s_nm_per_rad, drop.threshold_rad
+    procs: dict[str, subprocess.Popen[str]] = {}
+    bags: list[TrialBag] = []
+    try:
+        procs["actuator_driver"] = start_node("actuator_driver", {
+            "sim_actuator": actuator, "sim_environment": "drop_rig", "sim_rig_seed": seed,
+            "k_s": k_s, "k_d": drop.k_d_nms_per_rad, "position_min_rad": -100.0,
+            "position_max_rad": 100.0, "command_timeout_s": 60.0, "max_missed_replies": 100,
+            "torque_limit_nm": get_actuator(actuator).peak_torque_nm,
+        }, domain_id=domain)  # fmt: skip
+        procs["contact_estimator"] = start_node("contact_estimator", {
+            "k_s": k_s, "contact_onset_rad": threshold, "contact_release_rad": threshold / 2,
+        }, domain_id=domain)  # fmt: skip
+        with Listener("transparency_rig") as node:
+            call = ServiceCaller(node, lambda: _exited(procs))
+            recorder = Recorder(node, RECORDED)
+            daq: list[Float64MultiArray] = []
+            recording = [False]
+
+            def on_daq(msg: Float64MultiArray) -> None:
+                if recording[0]:
+                    daq.append(msg)
+
+            node.create_subscription(Float64MultiArray, DAQ_TOPIC, on_daq, 100)
+            commands = node.create_publisher(JointState, "/joint_commands", 10)
+            _wait_ready(node, call)
+            mass = drop.shuttle_mass_for(actuator)
+            for h in heights_m:
+                for trial in range(1, trials_per_height + 1):
+                    name = f"h{h * 1000:05.1f}mm_t{trial:02d}"
+                    progress(f"{actuator} {name}")
+                    _set_height(call, h)
+                    call(Trigger, "/actuator_driver/sim/lift", Trigger.Request())
+                    time.sleep(0.5)  # the arm springs back to theta_d = 0
+                    call(Trigger, "/contact_estimator/reset", Trigger.Request())
+                    daq.clear()
+                    recording[0] = True
+                    recorder.start()
+                    command = JointState(name=["joint"], position=[0.0])
+                    command.header.stamp = s_to_stamp(node.get_clock().now().nanoseconds * 1e-9)
+                    commands.publish(command)
+                    time.sleep(0.05)
+                    call(Trigger, "/actuator_driver/sim/drop", Trigger.Request())
+                    time.sleep(math.sqrt(2.0 * h / GRAVITY) + after_contact_s)
+                    time.sleep(0.05)  # the last DAQ block
+                    recording[0] = False
+                    messages = recorder.stop()
+                    custom = {
+                        "transparency.actuator": actuator,
+                        "transparency.k_s": repr(k_s),
+                        "transparency.k_d": repr(drop.k_d_nms_per_rad),
+                        "transparency.threshold_rad": repr(threshold),
+                        "transparency.shuttle_mass_kg": repr(mass),
+                        "transparency.arm_length_m": repr(drop.arm_length_m),
+                        "transparency.arm_inertia_kgm2": repr(drop.arm_inertia_kgm2),
+                        "transparency.drop_height_m": repr(h),
+                        "transparency.trial": "drop_test",
+                    }
+                    path = bag_dir / name
+                    with BagWriter(path, custom) as bag:
+                        recorder.write_into(bag, messages)
+                        bag.add("/load_cell", "geometry_msgs/msg/WrenchStamped")
+                        bag.add("/shuttle/height", "geometry_msgs/msg/PointStamped")
+                        for topic, ns, msg in _daq_messages(daq):
+                            bag.write_message(topic, ns, msg)
+                        count = bag.count
+                    if not any(t == "/joint_states" for t, _, _ in messages) or not daq:
+                        raise RigRunError(f"trial {name}: no /joint_states or no DAQ recorded")
+                    bags.append(TrialBag(path, h, count))
+    finally:
+        logs = {name: stop_node(proc) for name, proc in procs.items()}
+        log = logs.get("actuator_driver", "")
+        if log and "motor enabled at exit: False" not in log:
+            raise RigRunError("actuator_driver did not report a disabled motor at exit")
+    return bags
+
+
+def _exited(procs: dict[str, subprocess.Popen[str]]) -> str | None:
+    for name, proc in procs.items():
+        if proc.poll() is not None:
+            return f"{name} exited with code {proc.returncode}"
+    return None
+
+
+def _wait_ready(node: Any, call: ServiceCaller) -> None:
+    got: list[bool] = []
+    sub = node.create_subscription(JointState, "/joint_states", lambda _m: got.append(True), 10)
+    deadline = time.monotonic() + 20.0
+    while not got and time.monotonic() < deadline:
+        call.check()
+        time.sleep(0.05)
+    node.destroy_subscription(sub)
+    if not got:
+        raise RigRunError("actuator_driver published no /joint_states within 20 s")
+
+
+def _set_height(call: ServiceCaller, height_m: float) -> None:
+    value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=height_m)
+    request = SetParameters.Request(
+        parameters=[ParameterMsg(name="sim_drop_height_m", value=value)]
+    )
+    result = call(SetParameters, "/actuator_driver/set_parameters", request)
+    if not result.results or not result.results[0].successful:
+        reason = result.results[0].reason if result.results else "no result"
+        raise RigRunError(f"actuator_driver refused sim_drop_height_m={height_m}: {reason}")
