@@ -1,0 +1,283 @@
+"""Read any rosbag2 bag into Python values and numpy arrays (rosbags underneath, no rclpy).
+
+What it opens: a bag directory (metadata.yaml, versions 4-9) in MCAP or sqlite3 storage, with
+file or message compression and split files; a directory of .mcap files without metadata.yaml
+(each file read in name order); a single .mcap or .db3 file.
+
+Known traps it handles:
+* **QoS mismatch.** rosbags pairs a bag's metadata connections with the storage's by equality,
+  QoS profiles included; when the metadata's QoS differs from the storage's (bags converted by
+  other tools), it yields *zero* messages without an error. Every topic read is checked against
+  the recorded message count; a topic that came back empty is read again from the storage files
+  directly, which yields its messages (``recovered_topics`` says which).
+* **Types.** Types missing from the ROS 2 Jazzy typestore are registered from the definitions the
+  bag embeds (MCAP schemas, sqlite3 message_definitions); legacy names without ``/msg/``
+  (``test_msgs/BasicTypes``) are normalised. A type the bag does not define is a clear error.
+
+Every error is a :class:`BagReadError` naming the bag and, where it applies, the topic.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from rosbags.interfaces import Connection, MessageDefinitionFormat
+from rosbags.rosbag2 import Reader, ReaderError
+from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+from transparency_ros.bag.errors import BagReadError
+
+STORAGE_SUFFIXES = (".mcap", ".db3")
+
+
+def normalise_type(name: str) -> str:
+    """'pkg/Name' (legacy) -> 'pkg/msg/Name'; other names unchanged."""
+    parts = name.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    msgtype: str
+    count: int  # as recorded (metadata / storage summary)
+    serialization_format: str
+
+
+@dataclass
+class BagSource:
+    """An open bag. Use as a context manager; see :func:`open_bag`."""
+
+    path: Path
+    storage_paths: list[Path]
+    _readers: list[Reader] = field(default_factory=list)
+    typestore: Any = field(default_factory=lambda: get_typestore(Stores.ROS2_JAZZY))
+    recovered_topics: set[str] = field(default_factory=set)
+    type_errors: dict[str, str] = field(default_factory=dict)  # topic -> why it cannot be read
+
+    # ----------------------------------------------------------------- open / close
+
+    def __enter__(self) -> BagSource:
+        try:
+            if (self.path / "metadata.yaml").exists() or self.path.is_file():
+                self._readers = [Reader(self.path)]
+            else:
+                self._readers = [Reader(p) for p in self.storage_paths]
+            for reader in self._readers:
+                reader.open()
+        except (ReaderError, OSError, KeyError, ValueError) as err:
+            self.close()
+            raise BagReadError(f"{self.path}: cannot open bag: {err}") from err
+        self._register_types()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        for reader in self._readers:
+            if reader.is_open:
+                reader.close()
+        self._readers = []
+
+    # ----------------------------------------------------------------- what is in it
+
+    @property
+    def connections(self) -> list[Connection]:
+        return [c for reader in self._readers for c in reader.connections]
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        topics: dict[str, TopicInfo] = {}
+        for c in self.connections:
+            fmt = getattr(c.ext, "serialization_format", "cdr")
+            known = topics.get(c.topic)
+            count = c.msgcount + (known.count if known else 0)
+            topics[c.topic] = TopicInfo(normalise_type(c.msgtype), count, fmt)
+        return topics
+
+    @property
+    def custom_data(self) -> dict[str, str]:
+        data: dict[str, str] = {}
+        for reader in self._readers:
+            custom = getattr(reader.storage.metadata, "custom", None)
+            data.update(custom or {})
+        return data
+
+    def require_custom(self, *keys: str) -> dict[str, str]:
+        data = self.custom_data
+        missing = [k for k in keys if k not in data]
+        if missing:
+            raise BagReadError(f"{self.path}: metadata custom_data lacks {', '.join(missing)}")
+        return {k: data[k] for k in keys}
+
+    def require_topic(self, topic: str, msgtype: str | None = None) -> TopicInfo:
+        info = self.topics.get(topic)
+        if info is None:
+            have = ", ".join(sorted(self.topics)) or "none"
+            raise BagReadError(f"{self.path}: no topic {topic} (topics: {have})")
+        if msgtype is not None and info.msgtype != msgtype:
+            raise BagReadError(f"{self.path}: topic {topic} is {info.msgtype}, expected {msgtype}")
+        return info
+
+    # ----------------------------------------------------------------- messages
+
+    def _register_types(self) -> None:
+        known = set(self.typestore.types)
+        for c in self.connections:
+            name = normalise_type(c.msgtype)
+            if name in known or c.msgdef is None or not c.msgdef.data.strip():
+                continue
+            try:
+                if c.msgdef.format == MessageDefinitionFormat.IDL:
+                    types = get_types_from_idl(c.msgdef.data)
+                else:
+                    types = get_types_from_msg(c.msgdef.data, name)
+                self.typestore.register(types)
+                known |= set(types)
+            except Exception as err:  # noqa: BLE001 - any parser failure: name the topic
+                # other topics stay readable; reading this one raises (see messages())
+                self.type_errors[c.topic] = (
+                    f"{self.path}: topic {c.topic}: cannot parse the embedded definition of "
+                    f"{c.msgtype}: {str(err).splitlines()[0]}"
+                )
+
+    def raw(self, topics: Sequence[str]) -> Iterator[tuple[Connection, int, bytes]]:
+        """(connection, log time [ns], CDR bytes) of the given topics, in storage order per
+        file; empty topics whose recorded count says otherwise are recovered (QoS mismatch)."""
+        for topic in topics:
+            self.require_topic(topic)
+        for topic in topics:
+            info = self.topics[topic]
+            if info.serialization_format != "cdr":
+                raise BagReadError(
+                    f"{self.path}: topic {topic}: serialization format "
+                    f"{info.serialization_format!r} is not cdr"
+                )
+        yielded = dict.fromkeys(topics, 0)
+        try:
+            for reader in self._readers:
+                wanted = [c for c in reader.connections if c.topic in yielded]
+                if wanted:
+                    for conn, stamp, data in reader.messages(connections=wanted):
+                        yielded[conn.topic] += 1
+                        yield conn, stamp, data
+        except ReaderError as err:
+            raise BagReadError(f"{self.path}: {err}") from err
+        empty = [t for t in topics if yielded[t] == 0 and self.topics[t].count > 0]
+        if empty:
+            yield from self._recover(empty)
+
+    def _recover(self, topics: list[str]) -> Iterator[tuple[Connection, int, bytes]]:
+        """Read topics straight from the storage files (metadata QoS did not match)."""
+        got = 0
+        for path in self.storage_paths:
+            try:
+                with Reader(path) as reader:
+                    wanted = [c for c in reader.connections if c.topic in topics]
+                    for item in reader.messages(connections=wanted):
+                        got += 1
+                        yield item
+            except ReaderError as err:
+                raise BagReadError(f"{self.path}: recovering {', '.join(topics)}: {err}") from err
+        if got == 0:
+            raise BagReadError(
+                f"{self.path}: topics {', '.join(topics)} record messages in the metadata but "
+                "none could be read from the storage"
+            )
+        self.recovered_topics.update(topics)
+
+    def messages(self, topics: Sequence[str]) -> Iterator[tuple[str, int, Any]]:
+        """(topic, log time [ns], deserialized message)."""
+        for topic in topics:
+            if topic in self.type_errors:
+                raise BagReadError(self.type_errors[topic])
+        for conn, stamp, data in self.raw(topics):
+            msgtype = normalise_type(conn.msgtype)
+            try:
+                msg = self.typestore.deserialize_cdr(data, msgtype)
+            except KeyError:
+                raise BagReadError(
+                    f"{self.path}: topic {conn.topic}: unknown message type {conn.msgtype} "
+                    "(not in ROS 2 Jazzy and not defined in the bag)"
+                ) from None
+            except Exception as err:
+                raise BagReadError(
+                    f"{self.path}: topic {conn.topic}: cannot deserialize a {msgtype} at "
+                    f"{stamp} ns: {err}"
+                ) from err
+            yield conn.topic, stamp, msg
+
+
+def open_bag(path: str | Path) -> BagSource:
+    """A :class:`BagSource` for a bag directory, a directory of .mcap files or a storage file."""
+    p = Path(path)
+    if not p.exists():
+        raise BagReadError(f"{p}: no such bag")
+    if p.is_file():
+        if p.suffix not in STORAGE_SUFFIXES:
+            raise BagReadError(f"{p}: not a bag (expected a directory, .mcap or .db3)")
+        return BagSource(p, [p])
+    files = sorted(f for f in p.iterdir() if f.suffix in STORAGE_SUFFIXES)
+    if not (p / "metadata.yaml").exists() and not files:
+        raise BagReadError(f"{p}: neither metadata.yaml nor .mcap/.db3 files")
+    return BagSource(p, files)
+
+
+# --------------------------------------------------------------------- arrays
+
+
+def stamp_s(header: Any) -> float:
+    return float(header.stamp.sec) + float(header.stamp.nanosec) * 1e-9
+
+
+@dataclass(frozen=True)
+class JointSeries:
+    stamp_s: np.ndarray  # (n,)
+    position: np.ndarray  # (n,)
+    velocity: np.ndarray  # (n,), NaN where absent
+    effort: np.ndarray  # (n,), NaN where absent
+
+
+def joint_series(bag: BagSource, topic: str, joint: str | None = None) -> JointSeries:
+    """One joint of a JointState topic as arrays (the first joint when ``joint`` is None)."""
+    bag.require_topic(topic, "sensor_msgs/msg/JointState")
+    rows: list[tuple[float, float, float, float]] = []
+    for _topic, _log, msg in bag.messages([topic]):
+        names = list(msg.name)
+        index = names.index(joint) if joint is not None and joint in names else 0
+        if joint is not None and joint not in names:
+            continue
+
+        def at(values: Any, i: int = index) -> float:
+            return float(values[i]) if len(values) > i else float("nan")
+
+        rows.append((stamp_s(msg.header), at(msg.position), at(msg.velocity), at(msg.effort)))
+    data = np.array(rows, dtype=float).reshape(-1, 4)
+    order = np.argsort(data[:, 0], kind="stable")
+    data = data[order]
+    return JointSeries(data[:, 0], data[:, 1], data[:, 2], data[:, 3])
+
+
+def scalar_series(bag: BagSource, topic: str, msgtype: str, field_path: str) -> np.ndarray:
+    """(n, 2) array of [stamp_s, value] for a stamped message; ``field_path`` like
+    'wrench.force.z' or 'point.z'."""
+    bag.require_topic(topic, msgtype)
+    parts = field_path.split(".")
+    rows = []
+    for _topic, _log, msg in bag.messages([topic]):
+        value: Any = msg
+        for part in parts:
+            value = getattr(value, part)
+        rows.append((stamp_s(msg.header), float(value)))
+    data = np.array(rows, dtype=float).reshape(-1, 2)
+    return data[np.argsort(data[:, 0], kind="stable")]
