@@ -39,10 +39,7 @@ def test_real_bags_read_completely(name: str) -> None:
         assert not bag.recovered_topics
 
 
-@pytest.mark.parametrize(
-    "name",
-    ["rosbag2_jazzy_mcap_talker_v4_qosmismatch", "rosbag2_jazzy_sqlite3_talker_v4_qosmismatch"],
-)
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_a_qos_mismatch_is_detected_and_recovered(storage: str) -> None:
     """rosbags alone yields 0 of these 20 messages (metadata QoS != storage QoS)."""
     name = f"rosbag2_jazzy_{storage}_talker_v4_qosmismatch"
