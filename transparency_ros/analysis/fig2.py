@@ -6,6 +6,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -60,8 +61,17 @@ def model_curves(
     return [ModelCurve(m, t_min, m.solve(grid)) for m, t_min in zip(models, t_mins, strict=True)]
 
 
-def plot_fig2(curves: Sequence[ModelCurve], path: str | Path, title: str | None = None) -> Path:
-    """Write Fig. 2a/2b (model curves) as a PNG. Headless: no display or pyplot state needed."""
+def plot_fig2(
+    curves: Sequence[ModelCurve],
+    path: str | Path,
+    title: str | None = None,
+    measured: Sequence[Any] = (),
+) -> Path:
+    """Write Fig. 2a/2b (model curves) as a PNG. Headless: no display or pyplot state needed.
+
+    ``measured``: trials (``TrialMetrics`` of :mod:`transparency_ros.analysis.drop_eval`) drawn
+    as points over the curves: detected trials as filled markers; missed ones at the bottom of
+    panel (a) as open markers."""
     # matplotlib is imported here, not at the top: the CLI starts fast when not plotting.
     from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: PLC0415
     from matplotlib.figure import Figure  # noqa: PLC0415
@@ -81,6 +91,17 @@ def plot_fig2(curves: Sequence[ModelCurve], path: str | Path, title: str | None 
         ax_e.plot(r.energy_j, r.delta_e_j, color=colour, label=name)
         for ax in (ax_t, ax_e):
             ax.axvline(curve.min_detectable_energy_j, color=colour, ls=":", lw=1)
+    for trial in measured:
+        colour = ACTUATOR_COLOURS.get(trial.actuator)
+        if trial.energy_j is None:
+            continue
+        if trial.detected:
+            ax_t.plot(trial.energy_j, trial.t_r_s * 1e3, "o", color=colour, ms=5, mec="k", mew=0.5)
+            if trial.delta_e_j is not None and trial.delta_e_j > 0:
+                ax_e.plot(trial.energy_j, trial.delta_e_j, "o", color=colour, ms=5, mec="k",
+                          mew=0.5)  # fmt: skip
+        else:
+            ax_t.plot(trial.energy_j, 0.3, "o", mfc="none", color=colour, ms=6)
     energies = np.concatenate([c.result.energy_j for c in curves])
     ax_e.plot(energies, energies, color="0.6", lw=0.8, ls="--", label="ΔE = T (all energy lost)")
     ax_t.set(

@@ -1,0 +1,215 @@
+"""Drop-test evaluation from bags that follow the bag contract (README, "Bag contract").
+
+Per trial, as in Sec. 3.1 of the paper:
+* t_t: first load-cell sample above ``contact_force_threshold_n`` (1 N);
+* T = 1/2 m_s v_s,t^2, with v_s,t from a quadratic fitted to the shuttle height over the
+  ``fit_window_s`` before t_t (free fall: the fit removes the potentiometer noise);
+* t_e: the first recorded /contact onset after t_t, or, in a bag without one, the estimator
+  replayed offline on /joint_states (eq. 1 and the threshold of the bag's custom_data);
+* t_r = t_e - t_t; v_s,e from a local quadratic fit of the height around t_e;
+* Delta E = 1/2 m_s (v_s,t^2 - v_s,e^2) (eq. 4); F_mu = the load cell at t_e; F_est = tau_hat / r.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from transparency_ros.bag.errors import BagReadError
+from transparency_ros.bag.reader import BagSource, joint_series, open_bag, scalar_series
+from transparency_ros.core.config import load_drop_test
+from transparency_ros.core.estimator import DetectorSettings, SchmittDetector
+
+CUSTOM_KEYS = (
+    "transparency.actuator",
+    "transparency.k_s",
+    "transparency.threshold_rad",
+    "transparency.shuttle_mass_kg",
+    "transparency.arm_length_m",
+    "transparency.drop_height_m",
+)
+
+
+@dataclass(frozen=True)
+class TrialMetrics:
+    bag: str
+    actuator: str
+    drop_height_m: float
+    shuttle_mass_kg: float
+    t_t_s: float | None  # ROS time of true contact
+    energy_j: float | None  # T
+    v_s_t_m_s: float | None
+    detected: bool
+    estimate_source: str  # "recorded /contact", "offline estimator", or "none"
+    t_r_s: float | None
+    v_s_e_m_s: float | None
+    delta_e_j: float | None
+    f_measured_n: float | None  # load cell at t_e
+    f_estimated_n: float | None  # tau_hat / r at t_e
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _quadratic_velocity(t: np.ndarray, h: np.ndarray, at_s: float) -> float:
+    coef = np.polyfit(t - at_s, h, 2)
+    return float(coef[1])  # d/dt at t = at_s
+
+
+def _offline_onset(bag: BagSource, k_s: float, threshold: float) -> tuple[float, float] | None:
+    """(stamp, tau_hat) of the first onset of the estimator replayed on /joint_states."""
+    states = joint_series(bag, "/joint_states")
+    theta_d = 0.0
+    if "/joint_commands" in bag.topics:
+        commands = joint_series(bag, "/joint_commands")
+        finite = np.isfinite(commands.position)
+        if finite.any():
+            theta_d = float(commands.position[finite][-1])
+    detector = SchmittDetector(
+        DetectorSettings(contact_onset=threshold, contact_release=threshold / 2)
+    )
+    for stamp, position in zip(states.stamp_s, states.position, strict=True):
+        error = theta_d - float(position)
+        for event in detector.update("joint", float(stamp), error, k_s * error):
+            if event.kind == "contact":
+                return event.stamp_s, event.torque_nm
+    return None
+
+
+def evaluate_trial(path: str | Path, fit_window_s: float = 0.015) -> TrialMetrics:
+    drop = load_drop_test()
+    with open_bag(path) as bag:
+        custom = bag.require_custom(*CUSTOM_KEYS)
+        actuator = custom["transparency.actuator"]
+        try:
+            k_s = float(custom["transparency.k_s"])
+            threshold = float(custom["transparency.threshold_rad"])
+            mass = float(custom["transparency.shuttle_mass_kg"])
+            arm = float(custom["transparency.arm_length_m"])
+            height = float(custom["transparency.drop_height_m"])
+        except ValueError as err:
+            raise BagReadError(f"{path}: custom_data value is not a number: {err}") from err
+        force = scalar_series(
+            bag, "/load_cell", "geometry_msgs/msg/WrenchStamped", "wrench.force.z"
+        )
+        shuttle = scalar_series(bag, "/shuttle/height", "geometry_msgs/msg/PointStamped", "point.z")
+        above = np.nonzero(force[:, 1] > drop.contact_force_threshold_n)[0]
+        none = TrialMetrics(str(path), actuator, height, mass, None, None, None, False, "none",
+                            None, None, None, None, None)  # fmt: skip
+        if above.size == 0:
+            return none
+        t_t = float(force[above[0], 0])
+        before = (shuttle[:, 0] >= t_t - fit_window_s) & (shuttle[:, 0] < t_t - 2e-4)
+        if np.count_nonzero(before) < 10:
+            raise BagReadError(f"{path}: /shuttle/height has too few samples before contact")
+        v_t = _quadratic_velocity(shuttle[before, 0], shuttle[before, 1], t_t)
+        energy = 0.5 * mass * v_t**2
+        onset: tuple[float, float] | None = None
+        source = "none"
+        if "/contact" in bag.topics and bag.topics["/contact"].count > 0:
+            for _topic, _log, msg in bag.messages(["/contact"]):
+                stamp = float(msg.header.stamp.sec) + msg.header.stamp.nanosec * 1e-9
+                if stamp >= t_t - 0.002:
+                    onset, source = (stamp, float(msg.wrench.torque.z)), "recorded /contact"
+                    break
+        if onset is None:
+            onset = _offline_onset(bag, k_s, threshold)
+            source = "offline estimator" if onset is not None else "none"
+    base = TrialMetrics(str(path), actuator, height, mass, t_t, energy, v_t, False, source,
+                        None, None, None, None, None)  # fmt: skip
+    if onset is None:
+        return base
+    t_e, tau_hat = onset
+    near = np.abs(shuttle[:, 0] - t_e) <= 0.001
+    v_e = (
+        _quadratic_velocity(shuttle[near, 0], shuttle[near, 1], t_e)
+        if near.sum() >= 5
+        else math.nan
+    )
+    f_mu = float(np.interp(t_e, force[:, 0], force[:, 1]))
+    return TrialMetrics(str(path), actuator, height, mass, t_t, energy, v_t, True, source,
+                        t_e - t_t, v_e, 0.5 * mass * (v_t**2 - v_e**2), f_mu,
+                        abs(tau_hat) / arm)  # fmt: skip
+
+
+def find_bags(paths: Sequence[str | Path]) -> list[Path]:
+    """Bag directories under the given paths (a bag itself, or directories holding bags)."""
+    found: list[Path] = []
+    for raw in paths:
+        p = Path(raw)
+        if not p.exists():
+            raise BagReadError(f"{p}: no such bag or directory")
+        if (p / "metadata.yaml").exists() or p.is_file():
+            found.append(p)
+            continue
+        found += sorted(m.parent for m in p.rglob("metadata.yaml"))
+    if not found:
+        raise BagReadError(
+            f"no bags (directories with metadata.yaml) under {', '.join(map(str, paths))}"
+        )
+    return found
+
+
+def evaluate(
+    paths: Sequence[str | Path],
+    progress: Callable[[int, int, Path], None] = lambda *_: None,
+) -> list[TrialMetrics]:
+    bags = find_bags(paths)
+    results = []
+    for i, bag in enumerate(bags, 1):
+        progress(i, len(bags), bag)
+        results.append(evaluate_trial(bag))
+    return results
+
+
+@dataclass(frozen=True)
+class ActuatorSummary:
+    actuator: str
+    trials: int
+    detected: int
+    min_detected_energy_j: float | None  # smallest T among detected trials
+    max_missed_energy_j: float | None  # largest T among missed trials
+    delta_e_slope: float | None  # least-squares slope of Delta E vs T (detected trials)
+    model_min_detectable_energy_j: float
+    model_delta_e_slope: float
+    t_r_error_median_ms: float | None  # measured - model, median over detected trials
+
+
+def summarise(results: Sequence[TrialMetrics]) -> list[ActuatorSummary]:
+    from transparency_ros.analysis.fig2 import model_curves  # noqa: PLC0415
+    from transparency_ros.core.contact_model import model_for  # noqa: PLC0415
+
+    out = []
+    for actuator in dict.fromkeys(r.actuator for r in results):
+        rows = [r for r in results if r.actuator == actuator]
+        hit = [r for r in rows if r.detected and r.energy_j is not None and r.delta_e_j is not None]
+        miss = [r for r in rows if not r.detected and r.energy_j is not None]
+        energies = np.array([r.energy_j for r in hit], dtype=float)
+        losses = np.array([r.delta_e_j for r in hit], dtype=float)
+        model = model_for(actuator)
+        curve = model_curves([model])[0]
+        slope = float(np.polyfit(energies, losses, 1)[0]) if len(hit) >= 2 else None
+        errors = []
+        predicted = model.solve(energies) if hit else None
+        for i, r in enumerate(hit):
+            if predicted is not None and bool(predicted.detected[i]) and r.t_r_s is not None:
+                errors.append((r.t_r_s - float(predicted.t_r_s[i])) * 1e3)
+        out.append(
+            ActuatorSummary(
+                actuator,
+                len(rows),
+                len(hit),
+                float(energies.min()) if hit else None,
+                max((float(r.energy_j or 0.0) for r in miss), default=None),
+                slope,
+                curve.min_detectable_energy_j,
+                curve.delta_e_slope,
+                float(np.median(errors)) if errors else None,
+            )
+        )
+    return out
