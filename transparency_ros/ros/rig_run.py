@@ -134,18 +134,24 @@ def run_rig(
             mass = drop.shuttle_mass_for(actuator)
             for h in heights_m:
                 for trial in range(1, trials_per_height + 1):
-                    name = f"h{h * 1000:05.1f}mm_t{trial:02d}"
+                    name = f"h{h * 1000:06.1f}mm_t{trial:02d}"
                     progress(f"{actuator} {name}")
                     _set_height(call, h)
                     call(Trigger, "/actuator_driver/sim/lift", Trigger.Request())
-                    time.sleep(0.5)  # the arm springs back to theta_d = 0
+                    time.sleep(0.5)  # the arm springs back, and stops where friction holds it
+                    # zero the virtual spring where the arm rests (geared actuators stop up to
+                    # tau_s / k_s from theta_d, more than the 0.1 rad threshold), then listen
+                    rest = _rest_position(node, call)
+                    command = JointState(name=["joint"], position=[rest])
+                    command.header.stamp = s_to_stamp(node.get_clock().now().nanoseconds * 1e-9)
+                    commands.publish(command)
+                    time.sleep(0.1)
                     call(Trigger, "/contact_estimator/reset", Trigger.Request())
                     daq.clear()
                     recording[0] = True
                     recorder.start()
-                    command = JointState(name=["joint"], position=[0.0])
                     command.header.stamp = s_to_stamp(node.get_clock().now().nanoseconds * 1e-9)
-                    commands.publish(command)
+                    commands.publish(command)  # recorded: theta_d of this trial
                     time.sleep(0.05)
                     call(Trigger, "/actuator_driver/sim/drop", Trigger.Request())
                     time.sleep(math.sqrt(2.0 * h / GRAVITY) + after_contact_s)
@@ -199,6 +205,22 @@ def _wait_ready(node: Any, call: ServiceCaller) -> None:
     node.destroy_subscription(sub)
     if not got:
         raise RigRunError("actuator_driver published no /joint_states within 20 s")
+
+
+def _rest_position(node: Any, call: ServiceCaller) -> float:
+    """The arm's position now (one /joint_states sample)."""
+    got: list[float] = []
+    sub = node.create_subscription(
+        JointState, "/joint_states", lambda m: got.append(float(m.position[0])), 10
+    )
+    deadline = time.monotonic() + 5.0
+    while not got and time.monotonic() < deadline:
+        call.check()
+        time.sleep(0.01)
+    node.destroy_subscription(sub)
+    if not got:
+        raise RigRunError("no /joint_states while the arm rests")
+    return got[-1]
 
 
 def _set_height(call: ServiceCaller, height_m: float) -> None:
