@@ -30,6 +30,7 @@ setup(
             "actuator_driver = transparency_ros.ros.actuator_driver:main",
             "contact_estimator = transparency_ros.ros.contact_estimator:main",
             "feel_cage_behavior = transparency_ros.ros.feel_cage_behavior:main",
+            "bag_replay = transparency_ros.ros.bag_replay:main",
         ],
     },
 )

@@ -1,0 +1,145 @@
+"""``bag_replay``: publish a bag's topics with their original timing, like ``ros2 bag play``.
+
+``ros2 bag play`` needs a full ROS install; this needs only the wheels. Messages are published
+serialized, as stored (no deserialization), at their recorded (log) times scaled by ``--rate``,
+from ``--start-offset`` seconds into the bag, optionally only ``--topics``, optionally in a
+``--loop``, optionally with ``/clock`` (rosgraph_msgs/Clock, the bag time, before every message
+and at least every 10 ms) for nodes running with ``use_sim_time``. Any bag the reader opens
+plays: MCAP or sqlite3, compressed, split, without metadata.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.utilities import remove_ros_args, try_shutdown
+from rosgraph_msgs.msg import Clock
+
+from transparency_ros.bag.errors import BagError
+from transparency_ros.bag.reader import open_bag
+
+NODE_NAME = "bag_replay"
+
+
+def message_class(msgtype: str) -> Any:
+    """The rosidl class of 'pkg/msg/Name'."""
+    package, kind, name = msgtype.split("/")
+    try:
+        return getattr(importlib.import_module(f"{package}.{kind}"), name)
+    except (ImportError, AttributeError) as err:
+        raise BagError(f"message type {msgtype} is not installed; cannot publish it") from err
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog=NODE_NAME,
+        description="Publish a rosbag2 bag's topics with their original timing (ros2 bag play).",
+    )
+    p.add_argument("bag", help="bag directory, directory of .mcap files, or a .mcap/.db3 file")
+    p.add_argument("--rate", type=float, default=1.0, help="playback rate factor (default 1)")
+    p.add_argument("--start-offset", type=float, default=0.0, metavar="S",
+                   help="start this many seconds into the bag")  # fmt: skip
+    p.add_argument("--topics", nargs="+", metavar="TOPIC", help="only these topics")
+    p.add_argument("--loop", action="store_true", help="play again and again until Ctrl-C")
+    p.add_argument("--clock", action="store_true", help="publish the bag time on /clock")
+    p.add_argument("--delay", type=float, default=0.5, metavar="S",
+                   help="wait after creating publishers (discovery) before playing")  # fmt: skip
+    args = p.parse_args(list(argv))
+    if not args.rate > 0:
+        p.error("--rate must be > 0")
+    if args.start_offset < 0 or args.delay < 0:
+        p.error("--start-offset and --delay must be >= 0")
+    return args
+
+
+class Player:
+    def __init__(self, node: Node, args: argparse.Namespace) -> None:
+        self.node, self.args = node, args
+        with open_bag(args.bag) as bag:
+            topics = bag.topics
+            chosen = args.topics or sorted(topics)
+            for topic in chosen:
+                bag.require_topic(topic)
+            self.topics = [t for t in chosen if topics[t].count > 0]
+            self.types = {t: topics[t].msgtype for t in self.topics}
+        self.publishers = {
+            t: node.create_publisher(message_class(m), t, QoSProfile(depth=1000))
+            for t, m in self.types.items()
+        }
+        self.clock = node.create_publisher(Clock, "/clock", 10) if args.clock else None
+        self.published = 0
+
+    def _publish_clock(self, bag_ns: int) -> None:
+        if self.clock is not None:
+            msg = Clock()
+            msg.clock.sec, msg.clock.nanosec = divmod(bag_ns, 10**9)
+            self.clock.publish(msg)
+
+    def play_once(self) -> int:
+        rate, offset_ns = self.args.rate, round(self.args.start_offset * 1e9)
+        start_bag: int | None = None
+        start_wall = 0.0
+        last_clock = -1
+        with open_bag(self.args.bag) as bag:
+            for conn, log_ns, data in bag.raw(self.topics):
+                if start_bag is None:
+                    start_bag = log_ns + offset_ns
+                    start_wall = time.monotonic()
+                if log_ns < start_bag:
+                    continue
+                target = start_wall + (log_ns - start_bag) * 1e-9 / rate
+                while True:
+                    remaining = target - time.monotonic()
+                    if remaining <= 0:
+                        break
+                    if self.clock is not None and remaining > 0.01:
+                        time.sleep(0.01)
+                        now_ns = start_bag + round((time.monotonic() - start_wall) * rate * 1e9)
+                        self._publish_clock(now_ns)
+                    else:
+                        time.sleep(remaining)
+                if log_ns != last_clock:
+                    self._publish_clock(log_ns)
+                    last_clock = log_ns
+                self.publishers[conn.topic].publish(bytes(data))
+                self.published += 1
+        return self.published
+
+
+def main(args: list[str] | None = None) -> int:
+    argv = sys.argv if args is None else args
+    options = parse_args(remove_ros_args(list(argv))[1:])
+    rclpy.init(args=list(argv))
+    node: Node | None = None
+    try:
+        node = Node(NODE_NAME)
+        player = Player(node, options)
+        time.sleep(options.delay)
+        while True:
+            player.play_once()
+            if not options.loop:
+                break
+        print(f"{NODE_NAME}: published {player.published} messages", file=sys.stderr)  # noqa: T201
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except BagError as err:
+        print(f"{NODE_NAME}: error: {err}", file=sys.stderr)  # noqa: T201
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
