@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from transparency_ros.canbus.client import ActuatorClient
+from transparency_ros.canbus.clock import WALL
 from transparency_ros.canbus.protocol import Feedback
 from transparency_ros.core.driver import DriverCore, DriverMode
 
@@ -151,7 +152,8 @@ class ControlLoop:
         samples: list[tuple[Feedback, float]] = []  # (sample, its time) in time order
         reason = ""
         with self.lock:
-            sent_s, sent_wall_s = self.clock(), time.time()
+            sent_s = self.clock()
+            sent_wall_s = WALL(sent_s)
             for queued, queued_rx in self.client.drain():
                 self._late(queued, queued_rx, sent_s, sent_wall_s, samples)
             command = self.core.command(sent_s)

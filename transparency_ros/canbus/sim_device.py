@@ -27,6 +27,7 @@ import can
 
 from transparency_ros.canbus import mit, moteus_fd, odrive
 from transparency_ros.canbus.client import BusSettings, to_frame, to_message
+from transparency_ros.canbus.clock import WALL
 from transparency_ros.canbus.errors import CanProtocolError, MalformedFrameError
 from transparency_ros.canbus.protocol import Frame
 from transparency_ros.core.actuator_physics import (
@@ -425,7 +426,7 @@ class SimulatedActuator:
             with self.lock:
                 now = self.clock()
                 if msg is not None:  # act at the frame's bus time (it may have waited for us)
-                    waited = max(0.0, time.time() - msg.timestamp)
+                    waited = max(0.0, WALL(now) - msg.timestamp)
                     last = self._last_s if self._last_s is not None else now
                     now = max(last, now - waited)
                 self.advance_to(now)
@@ -435,7 +436,7 @@ class SimulatedActuator:
                 out += self.personality.tick(self.physics, now)
             if self._silent.is_set():
                 continue
-            sent_at = time.time() - (self.clock() - now)  # the bus time of ``now``
+            sent_at = WALL(now)  # the bus time of ``now``
             for frame in out:
                 message = to_message(frame)
                 message.timestamp = sent_at

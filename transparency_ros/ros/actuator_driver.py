@@ -32,6 +32,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from transparency_ros.canbus import mit
 from transparency_ros.canbus.client import ActuatorClient, BusSettings
+from transparency_ros.canbus.clock import ClockOffset
 from transparency_ros.canbus.errors import BusError, CanProtocolError
 from transparency_ros.canbus.loop import ControlLoop
 from transparency_ros.canbus.protocol import (
@@ -306,6 +307,8 @@ class ActuatorDriverNode(LifecycleNode):
         self._joint_pub: Any = None
         self._command_sub: Any = None
         self._safe_lock = threading.Lock()
+        # time.monotonic() -> this node's ROS time, measured robustly (canbus/clock.py)
+        self._to_ros = ClockOffset(lambda: self.get_clock().now().nanoseconds * 1e-9)
         self._last_warn_s = -math.inf
         self._fault_reported = ""
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -543,7 +546,7 @@ class ActuatorDriverNode(LifecycleNode):
 
     def _ros_seconds_at(self, monotonic_s: float) -> float:
         """A time.monotonic() instant on this node's ROS clock."""
-        return self.get_clock().now().nanoseconds * 1e-9 - (time.monotonic() - monotonic_s)
+        return self._to_ros(monotonic_s)
 
     def _publish_sample(self, fb: Feedback, sampled_s: float) -> None:
         msg = JointState()
@@ -563,7 +566,7 @@ class ActuatorDriverNode(LifecycleNode):
         if stamp > 0:
             # a stamped command holds from its stamp on (streamed trajectories are extrapolated
             # from there, so transport latency does not make the joint lag)
-            age = self.get_clock().now().nanoseconds * 1e-9 - stamp
+            age = now - self._to_ros.back(stamp)
             if 0.0 <= age < 1.0:
                 now -= age
         try:

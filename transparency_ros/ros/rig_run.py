@@ -66,9 +66,9 @@ def _daq_messages(blocks: list[Float64MultiArray]) -> list[tuple[str, int, Any]]
     out: list[tuple[str, int, Any]] = []
     for block in blocks:
         data = block.data
-        for i in range(0, len(data) - 2, 3):
-            stamp_s, force, height = data[i], data[i + 1], data[i + 2]
-            ns = round(stamp_s * 1e9)
+        for i in range(0, len(data) - 3, 4):
+            sec, frac, force, height = data[i], data[i + 1], data[i + 2], data[i + 3]
+            ns = round(sec) * 10**9 + round(frac * 1e9)
             stamp = types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
             vec = types["geometry_msgs/msg/Vector3"]
             wrench = types["geometry_msgs/msg/WrenchStamped"](

@@ -10,13 +10,15 @@ Python would starve the driver loop, so the DAQ publishes blocks, as DAQ drivers
   ``sim_drop_height_m`` (a runtime parameter) above the arm tip;
 * ``~/sim/drop`` (std_srvs/Trigger): let it go (lifted first if it is not held);
 * ``~/sim/daq`` (std_msgs/Float64MultiArray), every ``1 / rate_hz`` s while samples exist:
-  layout dim[0] ``sample`` (rows), dim[1] ``stamp_s,force_n,height_m`` (3 columns): the ROS time
-  of each 10 kHz sample, the load-cell force [N] and the height of the shuttle's contact face
+  layout dim[0] ``sample`` (rows), dim[1] ``stamp_sec,stamp_frac_s,force_n,height_m`` (4
+  columns): the ROS time of each 10 kHz sample as whole seconds and fraction (one float64 would
+  round it to 0.24 us), the load-cell force [N] and the height of the shuttle's contact face
   above the arm tip at rest [m], both with the rig's sensor noise.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -28,7 +30,7 @@ from transparency_ros.canbus.sim_device import SimulatedActuator
 from transparency_ros.core.drop_rig import DropRig
 from transparency_ros.core.errors import ModelError
 
-DAQ_COLUMNS = ("stamp_s", "force_n", "height_m")
+DAQ_COLUMNS = ("stamp_sec", "stamp_frac_s", "force_n", "height_m")
 
 
 class SimRigInterface:
@@ -91,13 +93,18 @@ class SimRigInterface:
         if not samples:
             return
         msg = Float64MultiArray()
+        n, k = len(samples), len(DAQ_COLUMNS)
         msg.layout.dim = [
-            MultiArrayDimension(label="sample", size=len(samples), stride=3 * len(samples)),
-            MultiArrayDimension(label=",".join(DAQ_COLUMNS), size=3, stride=3),
+            MultiArrayDimension(label="sample", size=n, stride=k * n),
+            MultiArrayDimension(label=",".join(DAQ_COLUMNS), size=k, stride=k),
         ]
-        start = sim.start_monotonic_s
+        # ROS time of physics time 0, split so that adding a sample's time keeps precision
+        origin = self.ros_seconds_at(sim.start_monotonic_s)
+        whole = math.floor(origin)
         data: list[float] = []
         for s in samples:
-            data += [self.ros_seconds_at(start + s.time_s), s.force_n, s.height_m]
+            frac = (origin - whole) + s.time_s
+            carry = math.floor(frac)
+            data += [float(whole + carry), frac - carry, s.force_n, s.height_m]
         msg.data = data
         self._pub.publish(msg)
