@@ -185,9 +185,19 @@ def summarise(results: Sequence[TrialMetrics]) -> list[ActuatorSummary]:
     from transparency_ros.core.contact_model import model_for  # noqa: PLC0415
 
     out = []
-    for actuator in dict.fromkeys(r.actuator for r in results):
+    table1 = ("U10DD", "EC60", "T2822", "U10GB")
+    names = sorted(
+        dict.fromkeys(r.actuator for r in results),
+        key=lambda a: (table1.index(a) if a in table1 else len(table1), a),
+    )
+    for actuator in names:
         rows = [r for r in results if r.actuator == actuator]
-        hit = [r for r in rows if r.detected and r.energy_j is not None and r.delta_e_j is not None]
+        hit = [
+            r
+            for r in rows
+            if r.detected and r.energy_j is not None and r.delta_e_j is not None
+            and math.isfinite(r.delta_e_j)
+        ]  # fmt: skip
         miss = [r for r in rows if not r.detected and r.energy_j is not None]
         energies = np.array([r.energy_j for r in hit], dtype=float)
         losses = np.array([r.delta_e_j for r in hit], dtype=float)
@@ -203,7 +213,7 @@ def summarise(results: Sequence[TrialMetrics]) -> list[ActuatorSummary]:
             ActuatorSummary(
                 actuator,
                 len(rows),
-                len(hit),
+                sum(r.detected for r in rows),
                 float(energies.min()) if hit else None,
                 max((float(r.energy_j or 0.0) for r in miss), default=None),
                 slope,
