@@ -1,0 +1,1 @@
+"""Sim-vs-real discrepancy tool: locate the mismatch, name the missing physics, model it."""

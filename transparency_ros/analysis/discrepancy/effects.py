@@ -1,0 +1,246 @@
+"""Candidate effects: physics a nominal model may have left out, each with named SI parameters.
+
+An effect acts where its physics acts: an added torque (torque_offset, cogging, payload_gravity),
+the input path (torque_saturation), the joint's motion (stiction holds it), the sensor
+(sensor_delay, quantization), or the nominal terms themselves (parameter_drift: a nominal value
+is wrong; it names the term and gives the refitted value). ``initial`` guesses parameters from
+the inverse-dynamics residual of the recorded data, so fits start near the answer.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel, Trial, Windows
+
+STUCK_SPEED_RAD_S = 0.02
+
+
+def inverse_dynamics_residual(
+    model: NominalModel, trials: Sequence[Trial]
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(q, qd, torque the nominal model misses) over all samples: J q'' + passive - tau."""
+    from scipy.signal import savgol_filter  # noqa: PLC0415
+
+    qs, qds, res = [], [], []
+    for tr in trials:
+        n = max(5, round(0.02 / tr.dt) | 1)
+        qd = savgol_filter(tr.q, n, 3, deriv=1, delta=tr.dt)
+        qdd = savgol_filter(tr.q, n, 3, deriv=2, delta=tr.dt)
+        passive = (
+            model.viscous_nms_per_rad * qd
+            + model.coulomb_nm * np.tanh(qd / model.coulomb_smoothing_rad_s)
+            + model.gravity_nm * np.sin(tr.q + model.gravity_offset_rad)
+        )
+        qs.append(tr.q)
+        qds.append(qd)
+        res.append(model.inertia_kgm2 * qdd + passive - tr.tau)
+    return np.concatenate(qs), np.concatenate(qds), np.concatenate(res)
+
+
+@dataclass(frozen=True)
+class Effect:
+    name: str
+    param_names: tuple[str, ...]
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+
+    def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
+        return np.array([(lo + hi) / 2 for lo, hi in zip(self.lower, self.upper, strict=True)])
+
+    def adjust(self, model: NominalModel, p: FloatArray) -> NominalModel:
+        return model
+
+    def input(self, tau: FloatArray, p: FloatArray, w: Windows) -> FloatArray:
+        return tau
+
+    def torque(self, q: FloatArray, qd: FloatArray, p: FloatArray) -> FloatArray | float:
+        return 0.0
+
+    def hold(
+        self,
+        qd_old: FloatArray,
+        qd_new: FloatArray,
+        drive: FloatArray,
+        p: FloatArray,
+        model: NominalModel,
+    ) -> FloatArray:
+        return qd_new
+
+    def measure(self, out: FloatArray, p: FloatArray, w: Windows) -> FloatArray:
+        return out
+
+    @property
+    def fittable(self) -> bool:
+        return True
+
+
+class TorqueOffset(Effect):
+    def __init__(self) -> None:
+        super().__init__("torque_offset", ("offset_nm",), (-5.0,), (5.0,))
+
+    def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
+        _, _, r = inverse_dynamics_residual(model, trials)  # r = the torque the model misses
+        return np.array([float(np.clip(np.median(r), -5.0, 5.0))])
+
+    def torque(self, q: FloatArray, qd: FloatArray, p: FloatArray) -> float:
+        return float(p[0])
+
+
+class Cogging(Effect):
+    """tau = A sin(N q + phi), N (cycles per output revolution) picked from the residual."""
+
+    def __init__(self, cycles_per_rev: int = 0) -> None:
+        super().__init__("cogging", ("amplitude_nm", "phase_rad"), (0.0, -math.pi), (5.0, math.pi))
+        object.__setattr__(self, "cycles_per_rev", cycles_per_rev)
+
+    cycles_per_rev: int
+
+    def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
+        q, _, r = inverse_dynamics_residual(model, trials)
+        best = (0.0, 2, 0.0, 0.0)
+        for n in range(2, 61):  # N = 1 is a payload's gravity, not cogging
+            basis = np.c_[np.sin(n * q), np.cos(n * q)]
+            (a, b), *_ = np.linalg.lstsq(basis, r, rcond=None)
+            explained = float(np.sum((basis @ np.array([a, b])) ** 2))
+            if explained > best[0]:
+                best = (explained, n, math.hypot(a, b), math.atan2(b, a))
+        object.__setattr__(self, "cycles_per_rev", best[1])
+        return np.array([min(best[2], 5.0), best[3]])
+
+    def torque(self, q: FloatArray, qd: FloatArray, p: FloatArray) -> FloatArray:
+        return np.asarray(p[0] * np.sin(self.cycles_per_rev * q + p[1]), dtype=float)
+
+
+class PayloadGravity(Effect):
+    def __init__(self) -> None:
+        super().__init__(
+            "payload_gravity", ("mgl_nm", "offset_rad"), (0.0, -2 * math.pi), (20.0, 2 * math.pi)
+        )
+
+    def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
+        q, _, r = inverse_dynamics_residual(model, trials)
+        # r ~ mgl sin(q + o) = mgl cos(o) sin q + mgl sin(o) cos q
+        a, b = np.linalg.lstsq(np.c_[np.sin(q), np.cos(q)], r, rcond=None)[0]
+        # r = -mgl sin(q + o) = -mgl cos(o) sin q - mgl sin(o) cos q
+        return np.array([float(min(math.hypot(a, b), 20.0)), math.atan2(-b, -a)])
+
+    def torque(self, q: FloatArray, qd: FloatArray, p: FloatArray) -> FloatArray:
+        return np.asarray(-p[0] * np.sin(q + p[1]), dtype=float)
+
+
+class Stiction(Effect):
+    """Below a small speed the joint sticks until the driving torque exceeds static_nm."""
+
+    def __init__(self) -> None:
+        super().__init__("stiction", ("static_nm",), (0.0,), (10.0,))
+
+    def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
+        return np.array([max(model.coulomb_nm * 2.0, 0.05)])
+
+    def hold(
+        self,
+        qd_old: FloatArray,
+        qd_new: FloatArray,
+        drive: FloatArray,
+        p: FloatArray,
+        model: NominalModel,
+    ) -> FloatArray:
+        through_zero = (qd_old == 0.0) | (qd_old * qd_new <= 0.0)
+        stuck = through_zero & (np.abs(drive) <= p[0])
+        return np.where(stuck, 0.0, qd_new)
+
+
+class TorqueSaturation(Effect):
+    def __init__(self) -> None:
+        super().__init__("torque_saturation", ("limit_nm",), (0.01,), (50.0,))
+
+    def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
+        peak = max(float(np.max(np.abs(tr.tau))) for tr in trials)
+        return np.array([0.8 * peak])
+
+    def input(self, tau: FloatArray, p: FloatArray, w: Windows) -> FloatArray:
+        return np.clip(tau, -p[0], p[0])
+
+
+class SensorDelay(Effect):
+    """Position and torque are ``delay_s`` apart (a late encoder or a late current loop): the
+    recorded motion answers the torque recorded ``delay_s`` earlier."""
+
+    def __init__(self) -> None:
+        super().__init__("sensor_delay", ("delay_s",), (0.0,), (0.05,))
+
+    def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
+        return np.array([0.005])
+
+    def input(self, tau: FloatArray, p: FloatArray, w: Windows) -> FloatArray:
+        before = w.extra["tau_before"]
+        full = np.concatenate([before, tau], axis=1)
+        m = before.shape[1]
+        k = np.arange(tau.shape[1], dtype=float) + m - p[0] / w.dt
+        k0 = np.clip(np.floor(k).astype(int), 0, full.shape[1] - 1)
+        k1 = np.clip(k0 + 1, 0, full.shape[1] - 1)
+        frac = np.clip(k - np.floor(k), 0.0, 1.0)
+        return np.asarray(full[:, k0] * (1 - frac) + full[:, k1] * frac, dtype=float)
+
+
+class Quantization(Effect):
+    """The position is reported on a lattice of ``step_rad`` (encoder resolution)."""
+
+    def __init__(self) -> None:
+        super().__init__("quantization", ("step_rad",), (1e-7,), (0.1,))
+
+    def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
+        steps = np.concatenate([np.abs(np.diff(tr.q)) for tr in trials])
+        nonzero = steps[steps > 1e-12]
+        return np.array([float(np.min(nonzero)) if nonzero.size else 1e-6])
+
+    def measure(self, out: FloatArray, p: FloatArray, w: Windows) -> FloatArray:
+        return np.asarray(np.round(out / p[0]) * p[0], dtype=float)
+
+    @property
+    def fittable(self) -> bool:
+        return False  # the lattice is read off the data; a gradient fit cannot move it
+
+
+class ParameterDrift(Effect):
+    """A nominal value is wrong: scale factors of inertia, viscous, Coulomb and gravity terms."""
+
+    TERMS = ("inertia_kgm2", "viscous_nms_per_rad", "coulomb_nm", "gravity_nm")
+
+    def __init__(self) -> None:
+        super().__init__(
+            "parameter_drift",
+            ("inertia_scale", "viscous_scale", "coulomb_scale", "gravity_scale"),
+            (0.2, 0.0, 0.0, 0.2),
+            (5.0, 5.0, 5.0, 5.0),
+        )
+
+    def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
+        return np.ones(4)
+
+    def adjust(self, model: NominalModel, p: FloatArray) -> NominalModel:
+        return replace(
+            model, **{t: getattr(model, t) * float(s) for t, s in zip(self.TERMS, p, strict=True)}
+        )
+
+
+def library() -> list[Effect]:
+    """The candidates the tool tries, in a fixed order."""
+    return [
+        ParameterDrift(),
+        TorqueOffset(),
+        PayloadGravity(),
+        Stiction(),
+        Cogging(),
+        TorqueSaturation(),
+        SensorDelay(),
+        Quantization(),
+    ]
+
+
+NOT_YET = ("backlash", "restitution", "impact_speed_loss", "structural_compliance")
