@@ -13,10 +13,10 @@ import sys
 from collections.abc import Sequence
 
 from transparency_ros import __version__
-from transparency_ros.commands import compare, demo, evaluate, feelcage, model, rig
+from transparency_ros.commands import compare, demo, discrepancy, evaluate, feelcage, model, rig
 from transparency_ros.core.errors import TransparencyError
 
-SUBCOMMANDS = (model, feelcage, rig, evaluate, compare, demo)
+SUBCOMMANDS = (model, feelcage, rig, evaluate, discrepancy, compare, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

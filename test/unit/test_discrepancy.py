@@ -92,3 +92,56 @@ def test_nominal_specs_are_validated(tmp_path: Path) -> None:
     dfki = Path("/nonexistent")
     with pytest.raises(ConfigError, match="cannot read"):
         load_nominal(dfki)
+
+
+def test_import_csv_then_discrepancy_json_and_report(tmp_path: Path) -> None:
+    from transparency_ros.cli import main  # noqa: PLC0415
+
+    out = write_campaign(tmp_path / "campaign", 1, hidden=["torque_offset"], trials=4)
+    csvs = sorted(str(f) for f in (out / "data").glob("*.csv"))
+    assert main(["import-csv", *csvs, "--out", str(tmp_path / "bags")]) == 0
+    bags = sorted((tmp_path / "bags").iterdir())
+    assert len(bags) == 4 and all((b / "metadata.yaml").exists() for b in bags)
+    import contextlib  # noqa: PLC0415
+    import io  # noqa: PLC0415
+
+    buffer = io.StringIO()
+    with contextlib.redirect_stdout(buffer):
+        code = main(
+            [
+                "discrepancy",
+                str(tmp_path / "bags"),
+                "--nominal",
+                str(out / "nominal.yaml"),
+                "--json",
+                "--report",
+                str(tmp_path / "report"),
+            ]
+        )
+    assert code == 0
+    result = json.loads(buffer.getvalue())
+    assert [f["effect"] for f in result["findings"]] == ["torque_offset"]
+    finding = result["findings"][0]
+    assert set(finding) >= {
+        "effect",
+        "parameters",
+        "where",
+        "evidence",
+        "confidence_interval",
+        "heldout_rmse_before",
+        "heldout_rmse_after",
+    }
+    low, high = finding["confidence_interval"]["offset_nm"]
+    assert low <= finding["parameters"]["offset_nm"] <= high
+    assert result["final_heldout_rmse"] < result["heldout_rmse_nominal"]
+    assert (tmp_path / "report" / "discrepancy.png").stat().st_size > 0
+    assert "torque_offset" in (tmp_path / "report" / "improvement.md").read_text()
+
+
+def test_a_drop_test_campaign_is_refused_clearly(tmp_path: Path) -> None:
+    from transparency_ros.cli import main  # noqa: PLC0415
+
+    bags = Path(__file__).resolve().parents[2] / "bags" / "U10DD"
+    spec = tmp_path / "n.yaml"
+    spec.write_text("inertia_kgm2: 0.001\n")
+    assert main(["discrepancy", str(bags), "--nominal", str(spec)]) == 2

@@ -71,7 +71,10 @@ def load_nominal(path: str | Path) -> NominalModel:
         m = finite_number(data["mass"], f"{p}: mass")
         length = finite_number(data["length"], f"{p}: length")
         g = finite_number(data.get("gravity", GRAVITY), f"{p}: gravity")
-        inertia = finite_number(data.get("inertia", m * length**2), f"{p}: inertia")
+        given = data.get("inertia")  # 'None' in some files: a point mass at the length
+        inertia = (
+            m * length**2 if given in (None, "None") else finite_number(given, f"{p}: inertia")
+        )
         return NominalModel(
             inertia_kgm2=inertia,
             viscous_nms_per_rad=finite_number(data.get("damping", 0.0), f"{p}: damping"),

@@ -1,0 +1,153 @@
+"""``transparency import-csv`` and ``transparency discrepancy`` (1-DoF torque-driven)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from transparency_ros.core.errors import ConfigError
+
+TRIAL_KIND = "torque_driven"
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "import-csv",
+        help="turn column data (time, position, velocity, torque) into rosbag2 MCAP bags",
+        description=(
+            "One bag per CSV file: /joint_states (sensor_msgs/msg/JointState) with position "
+            "[rad], velocity [rad/s] and effort = torque [N m], stamped with the time column; "
+            "custom_data transparency.trial = torque_driven and transparency.source = the file."
+        ),
+    )
+    p.add_argument("csv", nargs="+")
+    p.add_argument("--out", required=True, help="directory for the bags")
+    p.add_argument(
+        "--columns",
+        default="time,position,velocity,torque",
+        help="names of the time, position, velocity and torque columns, in that order",
+    )
+    p.add_argument("--joint", default="joint", help="joint name in the bag")
+    p.set_defaults(func=run_import)
+
+    d = subparsers.add_parser(
+        "discrepancy",
+        help="locate where a model and recordings differ, name and model the missing physics",
+        description=(
+            "For 1-DoF torque-driven recordings (bags with /joint_states: position, velocity, "
+            "effort = torque): simulate the nominal model in 0.1 s windows, fit candidate "
+            "effects on some trials, keep those that improve the held-out trials, report where "
+            "they act, and what is left unexplained. Drop-test campaigns are not supported yet."
+        ),
+    )
+    d.add_argument("bags", nargs="+", metavar="BAG_OR_DIR")
+    d.add_argument(
+        "--nominal",
+        required=True,
+        metavar="SPEC.yaml",
+        help="nominal model terms (inertia_kgm2, viscous_nms_per_rad, coulomb_nm, "
+        "gravity_nm, gravity_offset_rad) or a DFKI pendulum parameter file",
+    )
+    d.add_argument("--window", type=float, default=0.1, metavar="S", help="window length [s]")
+    d.add_argument("--json", action="store_true")
+    d.add_argument("--report", metavar="DIR", help="write plots and a summary table here")
+    d.set_defaults(func=run_discrepancy)
+
+
+def run_import(args: argparse.Namespace) -> int:
+    from transparency_ros.bag.writer import BagWriter, check_writable, message_types  # noqa: PLC0415
+
+    names = [c.strip() for c in args.columns.split(",")]
+    if len(names) != 4:
+        raise ConfigError("--columns needs four names: time, position, velocity, torque")
+    out = Path(args.out)
+    check_writable(out)
+    types = message_types()
+    for path in map(Path, args.csv):
+        try:
+            header = path.read_text().splitlines()[0].split(",")
+            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        except (OSError, ValueError, IndexError) as err:
+            raise ConfigError(f"{path}: cannot read CSV: {err}") from err
+        missing = [n for n in names if n not in header]
+        if missing:
+            raise ConfigError(f"{path}: no column(s) {missing}; the header has {header}")
+        cols = [data[:, header.index(n)] for n in names]
+        if not all(np.isfinite(c).all() for c in cols):
+            raise ConfigError(f"{path}: NaN or inf in the data")
+        t, q, qd, tau = cols
+        bag = out / path.stem
+        with BagWriter(
+            bag, {"transparency.trial": TRIAL_KIND, "transparency.source": path.name}
+        ) as writer:
+            writer.add("/joint_states", "sensor_msgs/msg/JointState")
+            for ti, qi, vi, ei in zip(t, q, qd, tau, strict=True):
+                ns = round(float(ti) * 1e9)
+                stamp = types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+                msg = types["sensor_msgs/msg/JointState"](
+                    header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
+                    name=[args.joint],
+                    position=np.array([qi]),
+                    velocity=np.array([vi]),
+                    effort=np.array([ei]),
+                )
+                writer.write_message("/joint_states", ns, msg)
+        print(f"{bag}  ({t.size} samples)")
+    return 0
+
+
+def run_discrepancy(args: argparse.Namespace) -> int:
+    from transparency_ros.analysis.discrepancy.discover import discover  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.model import Trial, load_nominal  # noqa: PLC0415
+    from transparency_ros.analysis.drop_eval import find_bags  # noqa: PLC0415
+    from transparency_ros.bag.reader import joint_series, open_bag  # noqa: PLC0415
+
+    model = load_nominal(args.nominal)
+    trials = []
+    for bag_path in find_bags(args.bags):
+        with open_bag(bag_path) as bag:
+            kind = bag.custom_data.get("transparency.trial", TRIAL_KIND)
+            if kind != TRIAL_KIND:
+                raise ConfigError(
+                    f"{bag_path}: {kind} campaigns are not supported yet "
+                    "(only 1-DoF torque-driven recordings)"
+                )
+            s = joint_series(bag, "/joint_states")
+        trials.append(
+            Trial(bag_path.name, s.stamp_s - s.stamp_s[0], s.position, s.velocity, s.effort)
+        )
+    report = discover(
+        model,
+        trials,
+        window_s=args.window,
+        progress=lambda text: print(text, file=sys.stderr, flush=True),
+    )
+    if args.report:
+        from transparency_ros.analysis.discrepancy.report import write_report  # noqa: PLC0415
+
+        for path in write_report(Path(args.report), model, trials, report, args.window):
+            print(f"wrote {path}", file=sys.stderr)
+    if args.json:
+        json.dump(report.as_dict(), sys.stdout, indent=2)
+        print()
+        return 0
+    print(f"nominal: {', '.join(f'{k} {v:g}' for k, v in report.nominal.items())}")
+    print(f"held-out trials: {', '.join(report.split['heldout'])}")
+    print(f"held-out simulation RMSE, nominal: {report.heldout_rmse_nominal:.4g} rad")
+    for f in report.findings:
+        params = ", ".join(f"{k} {v:.4g}" for k, v in f.parameters.items())
+        print(
+            f"found {f.effect}: {params}; where: {f.where['phase']} "
+            f"({f.where['trial']} {f.where['window_s']} s); {f.evidence}"
+        )
+    for u in report.unexplained:
+        print(f"unexplained: {u['looks_like']}")
+    if not report.findings and not report.unexplained:
+        print("no significant discrepancy: the nominal model explains the recordings")
+    print(f"final held-out RMSE: {report.final_heldout_rmse:.4g} rad ({report.seconds:.1f} s)")
+    return 0
