@@ -75,9 +75,13 @@ def test_no_effect_no_finding(tmp_path: Path) -> None:
 
 
 def test_an_effect_outside_the_library_is_unexplained_not_forced(tmp_path: Path) -> None:
-    report, _ = campaign(tmp_path, [OUTSIDE])
+    report, labels = campaign(tmp_path, [OUTSIDE])
     assert report.findings == []  # type: ignore[attr-defined]
     assert report.unexplained  # type: ignore[attr-defined]
+    # and what it looks like: an oscillation at the hidden ripple's frequency
+    truth = labels[OUTSIDE]["frequency_hz"]
+    for item in report.unexplained:  # type: ignore[attr-defined]
+        assert item["dominant_frequency_hz"] == pytest.approx(truth, abs=0.5)
     assert all("noise floor" in u["looks_like"] for u in report.unexplained)  # type: ignore[attr-defined]
 
 

@@ -261,7 +261,7 @@ class Discoverer:
             held_err = err
             remaining = [c for c in remaining if c is not cand]
         report.final_heldout_rmse = self._rmse(held_err)
-        report.unexplained = self._leftover(held_err)
+        report.unexplained = self._leftover(held_err, effects, params)
         report.seconds = time.perf_counter() - started
         return report
 
@@ -281,28 +281,56 @@ class Discoverer:
         span = w.q.shape[1] * w.dt
         return math.hypot(q_noise, v_noise * span / math.sqrt(3))
 
-    def _leftover(self, err: FloatArray) -> list[dict[str, Any]]:
+    def _torque_residual_peak(
+        self, effects: Sequence[Effect], params: Sequence[FloatArray]
+    ) -> float:
+        """Frequency [Hz] where the held-out torque residual (inverse dynamics with the found
+        torque effects, over whole trials, Welch spectrum) has most power above 0.5 Hz."""
+        from scipy.signal import welch  # noqa: PLC0415
+
+        from transparency_ros.analysis.discrepancy.effects import (  # noqa: PLC0415
+            inverse_dynamics_residual,
+        )
+
+        model = self.model
+        for effect, p in zip(effects, params, strict=True):
+            model = effect.adjust(model, p)
+        best_f, best_p = math.nan, -1.0
+        for trial in self.held_trials:
+            q, qd, r = inverse_dynamics_residual(model, [trial])
+            for effect, p in zip(effects, params, strict=True):
+                r = r - np.broadcast_to(effect.torque(q, qd, p), r.shape)
+            fs = 1.0 / trial.dt
+            f, power = welch(r - r.mean(), fs=fs, nperseg=min(r.size, round(4 * fs)))
+            keep = f > 0.5
+            if keep.any() and float(power[keep].max()) > best_p:
+                best_p = float(power[keep].max())
+                best_f = float(f[keep][int(np.argmax(power[keep]))])
+        return best_f
+
+    def _leftover(
+        self, err: FloatArray, effects: Sequence[Effect] = (), params: Sequence[FloatArray] = ()
+    ) -> list[dict[str, Any]]:
         """Structure the found effects do not explain: a phase whose residual is well above the
-        noise floor (estimated from the second difference of the recorded position)."""
+        noise floor, with the frequency where the torque residual has most power."""
         floor = self._noise_floor()
         out = []
+        peak: float | None = None
         for name, mask in _phases(self.w_held).items():
             if mask.sum() < 50:
                 continue
             rms = float(np.sqrt(np.mean(err[mask] ** 2)))
             if rms > 3 * floor:
-                spectrum = np.abs(np.fft.rfft(err - err.mean(axis=1, keepdims=True), axis=1)).mean(
-                    axis=0
-                )
-                freqs = np.fft.rfftfreq(err.shape[1], self.w_held.dt)
-                peak = float(freqs[1 + int(np.argmax(spectrum[1:]))]) if spectrum.size > 1 else 0.0
+                if peak is None:
+                    peak = self._torque_residual_peak(effects, params)
                 out.append(
                     {
                         "where": {"phase": name},
                         "rmse_rad": rms,
                         "noise_floor_rad": floor,
+                        "dominant_frequency_hz": peak,
                         "looks_like": f"residual {rms / floor:.0f}x the noise floor in phase "
-                        f"'{name}', dominant frequency {peak:.1f} Hz",
+                        f"'{name}'; the torque residual peaks near {peak:.1f} Hz",
                     }
                 )
         return out
