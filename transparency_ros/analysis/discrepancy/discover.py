@@ -36,6 +36,7 @@ from transparency_ros.analysis.discrepancy.model import (
 )
 from transparency_ros.core.errors import ModelError
 
+GRID_POINTS = 25
 PHASES = ("stuck", "reversal", "slow", "fast")
 
 
@@ -149,15 +150,22 @@ class Discoverer:
         x0 = np.clip(new.initial(self.model, self.fit_trials), new.lower, new.upper)
         if not new.fittable:
             return x0, None
-        # fit on a subsample of windows: speed; the held-out score uses all of them
         w = self.w_fit
 
         def residual(x: FloatArray) -> FloatArray:
             return self._error([*effects, new], [*params, x], w).ravel()
 
+        if x0.size == 1:
+            # one parameter: scan its range first. Effects with a threshold (stiction,
+            # saturation) change the error in steps, where finite-difference gradients are zero.
+            grid = np.unique(np.r_[np.linspace(new.lower[0], new.upper[0], GRID_POINTS), x0])
+            costs = [float(np.sum(residual(np.array([g])) ** 2)) for g in grid]
+            x0 = np.array([grid[int(np.argmin(costs))]])
         result = least_squares(
             residual, x0, bounds=(new.lower, new.upper), x_scale="jac", max_nfev=60, diff_step=1e-3
         )
+        if float(np.sum(result.fun**2)) > float(np.sum(residual(x0) ** 2)):
+            result.x = x0  # the local refinement did not help: keep the scanned value
         return result.x, result
 
     def _interval(self, result: Any, x: FloatArray) -> list[tuple[float, float]]:

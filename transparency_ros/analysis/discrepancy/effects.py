@@ -137,7 +137,7 @@ class Stiction(Effect):
     """Below a small speed the joint sticks until the driving torque exceeds static_nm."""
 
     def __init__(self) -> None:
-        super().__init__("stiction", ("static_nm",), (0.0,), (10.0,))
+        super().__init__("stiction", ("static_nm",), (0.0,), (3.0,))
 
     def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
         return np.array([max(model.coulomb_nm * 2.0, 0.05)])
