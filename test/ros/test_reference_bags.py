@@ -74,7 +74,8 @@ def test_replayed_bag_gives_the_recorded_onset(bag: Path, ros_context: Context) 
     try:
         replay = subprocess.run(
             [str(Path(sys.executable).parent / "bag_replay"), str(bag), "--rate", "0.25",
-             "--topics", "/joint_commands", "/joint_states", "--delay", "1.0"],
+             "--topics", "/joint_commands", "/joint_states", "--delay", "0.2",
+             "--wait-for-subscribers", "1"],
             capture_output=True, text=True, timeout=60, check=False,
         )  # fmt: skip
         assert replay.returncode == 0, replay.stderr

@@ -4,8 +4,9 @@
 serialized, as stored (no deserialization), at their recorded (log) times scaled by ``--rate``,
 from ``--start-offset`` seconds into the bag, optionally only ``--topics``, optionally in a
 ``--loop``, optionally with ``/clock`` (rosgraph_msgs/Clock, the bag time, before every message
-and at least every 10 ms) for nodes running with ``use_sim_time``. Any bag the reader opens
-plays: MCAP or sqlite3, compressed, split, without metadata.
+and at least every 10 ms) for nodes running with ``use_sim_time``, optionally only once every
+topic has ``--wait-for-subscribers`` subscribers (so a slow-to-discover node misses nothing).
+Any bag the reader opens plays: MCAP or sqlite3, compressed, split, without metadata.
 """
 
 from __future__ import annotations
@@ -51,6 +52,13 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument("--topics", nargs="+", metavar="TOPIC", help="only these topics")
     p.add_argument("--loop", action="store_true", help="play again and again until Ctrl-C")
     p.add_argument("--clock", action="store_true", help="publish the bag time on /clock")
+    p.add_argument(
+        "--wait-for-subscribers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="before playing, wait (up to 30 s) until every topic has N subscribers",
+    )
     p.add_argument("--delay", type=float, default=0.5, metavar="S",
                    help="wait after creating publishers (discovery) before playing")  # fmt: skip
     args = p.parse_args(list(argv))
@@ -77,6 +85,15 @@ class Player:
         }
         self.clock = node.create_publisher(Clock, "/clock", 10) if args.clock else None
         self.published = 0
+
+    def wait_for_subscribers(self, count: int, timeout_s: float) -> bool:
+        """True once every topic's publisher has matched ``count`` subscriptions."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if all(p.get_subscription_count() >= count for p in self.publishers.values()):
+                return True
+            time.sleep(0.05)
+        return False
 
     def _publish_clock(self, bag_ns: int) -> None:
         if self.clock is not None:
@@ -124,6 +141,13 @@ def main(args: list[str] | None = None) -> int:
         node = Node(NODE_NAME)
         player = Player(node, options)
         time.sleep(options.delay)
+        if options.wait_for_subscribers > 0 and not player.wait_for_subscribers(
+            options.wait_for_subscribers, 30.0
+        ):
+            wanted = options.wait_for_subscribers
+            message = f"{NODE_NAME}: error: fewer than {wanted} subscribers after 30 s"
+            print(message, file=sys.stderr)  # noqa: T201
+            return 2
         while True:
             player.play_once()
             if not options.loop:
