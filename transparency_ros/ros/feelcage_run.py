@@ -40,7 +40,13 @@ from transparency_ros.core import feel_cage as fc
 from transparency_ros.core.config import get_actuator
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.feel_cage_config import FeelCageSetup
-from transparency_ros.ros.harness import Listener, start_node, stop_node
+from transparency_ros.ros.harness import (
+    Listener,
+    driver_left_motor_enabled,
+    first_exited,
+    start_node,
+    stop_node,
+)
 from transparency_ros.ros.services import ServiceCaller, wait_until
 from transparency_ros.rosenv import pick_domain_id
 
@@ -110,25 +116,13 @@ def run_cell(
             domain_id=domain,
         )
         with Listener("feelcage_runner") as node:
-            return _trial(node, setup, settle, lambda: _exited(procs))
+            return _trial(node, setup, settle, lambda: first_exited(procs))
     finally:
         for name, proc in procs.items():
             logs[name] = stop_node(proc)
-        _check_safe(logs)
-
-
-def _exited(procs: dict[str, subprocess.Popen[str]]) -> str | None:
-    for name, proc in procs.items():
-        if proc.poll() is not None:
-            return f"{name} exited with code {proc.returncode}"
-    return None
-
-
-def _check_safe(logs: dict[str, str]) -> None:
-    log = logs.get("actuator_driver", "")
-    if log and "motor enabled at exit: False" not in log:
-        tail = "\n".join(log.splitlines()[-15:])
-        raise FeelCageRunError(f"actuator_driver did not report a disabled motor:\n{tail}")
+        tail = driver_left_motor_enabled(logs.get("actuator_driver", ""))
+        if tail:
+            raise FeelCageRunError(f"actuator_driver did not report a disabled motor:\n{tail}")
 
 
 def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[], str | None]

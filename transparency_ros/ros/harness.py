@@ -65,6 +65,21 @@ def stop_node(proc: subprocess.Popen[str], timeout_s: float = 10.0) -> str:
     return output or ""
 
 
+def first_exited(procs: dict[str, subprocess.Popen[str]]) -> str | None:
+    """Which node process has exited, and how (None while all run)."""
+    for name, proc in procs.items():
+        if proc.poll() is not None:
+            return f"{name} exited with code {proc.returncode}"
+    return None
+
+
+def driver_left_motor_enabled(log: str) -> str | None:
+    """The tail of an actuator_driver log that does not report a disabled motor at exit."""
+    if log and "motor enabled at exit: False" not in log:
+        return "\n".join(log.splitlines()[-15:])
+    return None
+
+
 class Listener:
     """``with Listener("name") as node:`` an rclpy node spinning in a background thread."""
 

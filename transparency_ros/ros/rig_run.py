@@ -35,7 +35,13 @@ from transparency_ros.core.config import get_actuator, load_drop_test
 from transparency_ros.core.drop_rig import GRAVITY
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.ros.conversions import s_to_stamp
-from transparency_ros.ros.harness import Listener, start_node, stop_node
+from transparency_ros.ros.harness import (
+    Listener,
+    driver_left_motor_enabled,
+    first_exited,
+    start_node,
+    stop_node,
+)
 from transparency_ros.ros.recorder import Recorder
 from transparency_ros.ros.services import ServiceCaller
 from transparency_ros.rosenv import pick_domain_id
@@ -119,7 +125,7 @@ def run_rig(
             "k_s": k_s, "contact_onset_rad": threshold, "contact_release_rad": threshold / 2,
         }, domain_id=domain)  # fmt: skip
         with Listener("transparency_rig") as node:
-            call = ServiceCaller(node, lambda: _exited(procs))
+            call = ServiceCaller(node, lambda: first_exited(procs))
             recorder = Recorder(node, RECORDED)
             daq: list[Float64MultiArray] = []
             recording = [False]
@@ -182,17 +188,10 @@ def run_rig(
                     bags.append(TrialBag(path, h, count))
     finally:
         logs = {name: stop_node(proc) for name, proc in procs.items()}
-        log = logs.get("actuator_driver", "")
-        if log and "motor enabled at exit: False" not in log:
-            raise RigRunError("actuator_driver did not report a disabled motor at exit")
+        tail = driver_left_motor_enabled(logs.get("actuator_driver", ""))
+        if tail:
+            raise RigRunError(f"actuator_driver did not report a disabled motor:\n{tail}")
     return bags
-
-
-def _exited(procs: dict[str, subprocess.Popen[str]]) -> str | None:
-    for name, proc in procs.items():
-        if proc.poll() is not None:
-            return f"{name} exited with code {proc.returncode}"
-    return None
 
 
 def _wait_ready(node: Any, call: ServiceCaller) -> None:
