@@ -49,6 +49,7 @@ class Finding:
     evidence: str
     heldout_rmse_before: float
     heldout_rmse_after: float
+    alternatives: list[str] = field(default_factory=list)  # explain the data as well
 
 
 @dataclass
@@ -216,7 +217,7 @@ class Discoverer:
         remaining = list(self.candidates)
         floor = self._noise_floor()
         while remaining:
-            best: tuple[float, Effect, FloatArray, Any, FloatArray, float] | None = None
+            passing: list[tuple[float, Effect, FloatArray, Any, FloatArray, float]] = []
             base_rmse, base_aic = (
                 self._rmse(held_err),
                 self._aic(held_err, sum(p.size for p in params)),
@@ -234,15 +235,16 @@ class Discoverer:
                     continue
                 if cand.name == "parameter_drift" and not _drifted(x):
                     continue  # refitted values close to nominal: no wrong parameter to name
-                if (
-                    gain >= self.min_improvement
-                    and aic < base_aic - 10
-                    and (best is None or aic < best[5])
-                ):
-                    best = (rmse, cand, x, result, err, aic)
-            if best is None:
+                if gain >= self.min_improvement and aic < base_aic - 10:
+                    passing.append((rmse, cand, x, result, err, aic))
+            if not passing:
                 break
-            rmse, cand, x, result, err, _ = best
+            # effects that explain the held-out data alike (within 5 % RMSE) cannot be told apart
+            # here: name the one with the fewest parameters, list the others as alternatives
+            top = min(passing, key=lambda c: c[5])
+            alike = [c for c in passing if c[0] <= 1.05 * top[0]]
+            rmse, cand, x, result, err, _ = min(alike, key=lambda c: (_size(c[1], c[2]), c[5]))
+            alternatives = [c[1].name for c in alike if c[1] is not cand]
             ci = self._interval(result, x)
             finding = Finding(
                 effect=cand.name,
@@ -258,9 +260,11 @@ class Discoverer:
                     f"held-out simulation RMSE {self._rmse(held_err):.4g} -> {rmse:.4g} rad "
                     f"({100 * (1 - rmse / self._rmse(held_err)):.0f} % lower) with "
                     f"{x.size} parameter(s)"
+                    + (f"; explained alike by {', '.join(alternatives)}" if alternatives else "")
                 ),
                 heldout_rmse_before=self._rmse(held_err),
                 heldout_rmse_after=rmse,
+                alternatives=alternatives,
             )
             report.findings.append(finding)
             self.progress(f"found {cand.name}: {finding.evidence}")
