@@ -149,3 +149,21 @@ def test_a_drop_test_campaign_is_refused_clearly(tmp_path: Path) -> None:
     spec = tmp_path / "n.yaml"
     spec.write_text("inertia_kgm2: 0.001\n")
     assert main(["discrepancy", str(bags), "--nominal", str(spec)]) == 2
+
+
+def test_effects_that_explain_alike_are_alternatives_and_the_simpler_is_named(
+    tmp_path: Path,
+) -> None:
+    # seed 123: a payload's gravity on a joint that turns only +-0.7 rad, where sin q and
+    # cogging's sin 2q fit the held-out data within 5 % of each other
+    out = write_campaign(tmp_path / "campaign", 123)
+    assert list(json.loads((out / "labels.json").read_text())["hidden"]) == ["payload_gravity"]
+    trials = [
+        Trial(f.stem, *np.loadtxt(f, delimiter=",", skiprows=1).T)
+        for f in sorted((out / "data").glob("*.csv"))
+    ]
+    report = discover(load_nominal(out / "nominal.yaml"), trials)
+    (finding,) = report.findings
+    assert finding.effect == "payload_gravity"
+    assert "cogging" in finding.alternatives
+    assert "explained alike by" in finding.evidence
