@@ -20,10 +20,14 @@ from collections.abc import Sequence
 
 import numpy as np
 import pysindy as ps
-from scipy.signal import savgol_filter
 
 from transparency_ros.analysis.discrepancy.discover import split_trials
-from transparency_ros.analysis.discrepancy.model import NominalModel, Trial, make_windows
+from transparency_ros.analysis.discrepancy.model import (
+    NominalModel,
+    Trial,
+    make_windows,
+    smooth_derivatives,
+)
 
 FREQUENCIES = 24
 THRESHOLDS = (0.1, 0.3, 1.0, 3.0)
@@ -53,10 +57,7 @@ def _library() -> ps.GeneralizedLibrary:
 
 
 def _smooth(trial: Trial) -> tuple[np.ndarray, np.ndarray]:
-    n = max(5, round(0.02 / trial.dt) | 1)
-    qd = savgol_filter(trial.q, n, 3, deriv=1, delta=trial.dt)
-    qdd = savgol_filter(trial.q, n, 3, deriv=2, delta=trial.dt)
-    return qd, qdd
+    return smooth_derivatives(trial, 0.02, 3)  # the derivatives the tool's residual uses
 
 
 def _coefficients(model: ps.SINDy) -> np.ndarray:

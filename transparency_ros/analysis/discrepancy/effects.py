@@ -15,7 +15,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel, Trial, Windows
+from transparency_ros.analysis.discrepancy.model import (
+    FloatArray,
+    NominalModel,
+    Trial,
+    Windows,
+    smooth_derivatives,
+)
 
 STUCK_SPEED_RAD_S = 0.02
 
@@ -24,13 +30,9 @@ def inverse_dynamics_residual(
     model: NominalModel, trials: Sequence[Trial]
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(q, qd, torque the nominal model misses) over all samples: J q'' + passive - tau."""
-    from scipy.signal import savgol_filter  # noqa: PLC0415
-
     qs, qds, res = [], [], []
     for tr in trials:
-        n = max(5, round(0.02 / tr.dt) | 1)
-        qd = savgol_filter(tr.q, n, 3, deriv=1, delta=tr.dt)
-        qdd = savgol_filter(tr.q, n, 3, deriv=2, delta=tr.dt)
+        qd, qdd = smooth_derivatives(tr, 0.02, 3)
         passive = (
             model.viscous_nms_per_rad * qd
             + model.coulomb_nm * np.tanh(qd / model.coulomb_smoothing_rad_s)

@@ -166,13 +166,23 @@ def make_windows(
     return w
 
 
-def _smooth_velocity(trial: Trial, span_s: float = 0.01) -> FloatArray:
+def smooth_derivatives(
+    trial: Trial, span_s: float, polyorder: int
+) -> tuple[FloatArray, FloatArray]:
+    """q' and q'' from a Savitzky-Golay fit of the position over ``span_s`` (the one place the
+    tool differentiates recorded positions; the recorded velocity is often too noisy)."""
     from scipy.signal import savgol_filter  # noqa: PLC0415
 
     n = max(5, round(span_s / trial.dt) | 1)
     if n >= trial.t.size:
-        return trial.qd
-    return np.asarray(savgol_filter(trial.q, n, 2, deriv=1, delta=trial.dt), dtype=float)
+        return trial.qd, np.gradient(trial.qd, trial.t)
+    qd = savgol_filter(trial.q, n, polyorder, deriv=1, delta=trial.dt)
+    qdd = savgol_filter(trial.q, n, polyorder, deriv=2, delta=trial.dt)
+    return np.asarray(qd, dtype=float), np.asarray(qdd, dtype=float)
+
+
+def _smooth_velocity(trial: Trial, span_s: float = 0.01) -> FloatArray:
+    return smooth_derivatives(trial, span_s, 2)[0]
 
 
 def simulate(
