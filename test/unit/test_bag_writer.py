@@ -10,14 +10,14 @@ from mcap.reader import make_reader
 
 from transparency_ros.bag.errors import BagWriteError
 from transparency_ros.bag.reader import open_bag, scalar_series
-from transparency_ros.bag.writer import BagWriter, check_writable, message_types
+from transparency_ros.bag.writer import BagWriter, check_writable, message_types, time_msg
 
 
 def point(z: float, ns: int) -> object:
     t = message_types()
     return t["geometry_msgs/msg/PointStamped"](
         header=t["std_msgs/msg/Header"](
-            stamp=t["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9),
+            stamp=time_msg(ns),
             frame_id="rail",
         ),
         point=t["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=z),

@@ -21,7 +21,13 @@ from typing import Any
 import numpy as np
 
 from transparency_ros.bag.errors import BagReadError
-from transparency_ros.bag.reader import BagSource, joint_series, open_bag, scalar_series
+from transparency_ros.bag.reader import (
+    BagSource,
+    find_bags,
+    joint_series,
+    open_bag,
+    scalar_series,
+)
 from transparency_ros.core.config import load_drop_test
 from transparency_ros.core.estimator import DetectorSettings, SchmittDetector
 
@@ -135,24 +141,6 @@ def evaluate_trial(path: str | Path, fit_window_s: float = 0.015) -> TrialMetric
     return TrialMetrics(str(path), actuator, height, mass, t_t, energy, v_t, True, source,
                         t_e - t_t, v_e, 0.5 * mass * (v_t**2 - v_e**2), f_mu,
                         abs(tau_hat) / arm)  # fmt: skip
-
-
-def find_bags(paths: Sequence[str | Path]) -> list[Path]:
-    """Bag directories under the given paths (a bag itself, or directories holding bags)."""
-    found: list[Path] = []
-    for raw in paths:
-        p = Path(raw)
-        if not p.exists():
-            raise BagReadError(f"{p}: no such bag or directory")
-        if (p / "metadata.yaml").exists() or p.is_file():
-            found.append(p)
-            continue
-        found += sorted(m.parent for m in p.rglob("metadata.yaml"))
-    if not found:
-        raise BagReadError(
-            f"no bags (directories with metadata.yaml) under {', '.join(map(str, paths))}"
-        )
-    return found
 
 
 def evaluate(

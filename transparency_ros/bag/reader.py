@@ -233,6 +233,24 @@ def open_bag(path: str | Path) -> BagSource:
     return BagSource(p, files)
 
 
+def find_bags(paths: Sequence[str | Path]) -> list[Path]:
+    """Bag directories under the given paths (a bag itself, or directories holding bags)."""
+    found: list[Path] = []
+    for raw in paths:
+        p = Path(raw)
+        if not p.exists():
+            raise BagReadError(f"{p}: no such bag or directory")
+        if (p / "metadata.yaml").exists() or p.is_file():
+            found.append(p)
+            continue
+        found += sorted(m.parent for m in p.rglob("metadata.yaml"))
+    if not found:
+        raise BagReadError(
+            f"no bags (directories with metadata.yaml) under {', '.join(map(str, paths))}"
+        )
+    return found
+
+
 # --------------------------------------------------------------------- arrays
 
 

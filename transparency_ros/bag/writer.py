@@ -113,3 +113,8 @@ class BagWriter:
 def message_types() -> Any:
     """The typestore's message classes (``types['sensor_msgs/msg/JointState']``)."""
     return TYPESTORE.types
+
+
+def time_msg(ns: int) -> Any:
+    """A builtin_interfaces/msg/Time of the typestore for ``ns`` nanoseconds."""
+    return TYPESTORE.types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)

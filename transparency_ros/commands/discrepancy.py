@@ -60,7 +60,12 @@ def register(subparsers: Any) -> None:
 
 
 def run_import(args: argparse.Namespace) -> int:
-    from transparency_ros.bag.writer import BagWriter, check_writable, message_types  # noqa: PLC0415
+    from transparency_ros.bag.writer import (  # noqa: PLC0415
+        BagWriter,
+        check_writable,
+        message_types,
+        time_msg,
+    )
 
     names = [c.strip() for c in args.columns.split(",")]
     if len(names) != 4:
@@ -88,7 +93,7 @@ def run_import(args: argparse.Namespace) -> int:
             writer.add("/joint_states", "sensor_msgs/msg/JointState")
             for ti, qi, vi, ei in zip(t, q, qd, tau, strict=True):
                 ns = round(float(ti) * 1e9)
-                stamp = types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+                stamp = time_msg(ns)
                 msg = types["sensor_msgs/msg/JointState"](
                     header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
                     name=[args.joint],
@@ -104,8 +109,7 @@ def run_import(args: argparse.Namespace) -> int:
 def run_discrepancy(args: argparse.Namespace) -> int:
     from transparency_ros.analysis.discrepancy.discover import discover  # noqa: PLC0415
     from transparency_ros.analysis.discrepancy.model import Trial, load_nominal  # noqa: PLC0415
-    from transparency_ros.analysis.drop_eval import find_bags  # noqa: PLC0415
-    from transparency_ros.bag.reader import joint_series, open_bag  # noqa: PLC0415
+    from transparency_ros.bag.reader import find_bags, joint_series, open_bag  # noqa: PLC0415
 
     model = load_nominal(args.nominal)
     trials = []

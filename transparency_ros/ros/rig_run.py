@@ -30,7 +30,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from transparency_ros.bag.writer import BagWriter, check_writable, message_types
+from transparency_ros.bag.writer import BagWriter, check_writable, message_types, time_msg
 from transparency_ros.core.config import get_actuator, load_drop_test
 from transparency_ros.core.drop_rig import GRAVITY
 from transparency_ros.core.errors import TransparencyError
@@ -75,7 +75,7 @@ def _daq_messages(blocks: list[Float64MultiArray]) -> list[tuple[str, int, Any]]
         for i in range(0, len(data) - 3, 4):
             sec, frac, force, height = data[i], data[i + 1], data[i + 2], data[i + 3]
             ns = round(sec) * 10**9 + round(frac * 1e9)
-            stamp = types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+            stamp = time_msg(ns)
             vec = types["geometry_msgs/msg/Vector3"]
             wrench = types["geometry_msgs/msg/WrenchStamped"](
                 header=types["std_msgs/msg/Header"](stamp=stamp, frame_id="load_cell"),
