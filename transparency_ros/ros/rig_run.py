@@ -136,7 +136,7 @@ def run_rig(
 
             node.create_subscription(Float64MultiArray, DAQ_TOPIC, on_daq, 100)
             commands = node.create_publisher(JointState, "/joint_commands", 10)
-            _wait_ready(node, call)
+            _joint_position(node, call, 20.0, "within 20 s of starting")
             mass = drop.shuttle_mass_for(actuator)
             for h in heights_m:
                 for trial in range(1, trials_per_height + 1):
@@ -147,7 +147,7 @@ def run_rig(
                     time.sleep(0.5)  # the arm springs back, and stops where friction holds it
                     # zero the virtual spring where the arm rests (geared actuators stop up to
                     # tau_s / k_s from theta_d, more than the 0.1 rad threshold), then listen
-                    rest = _rest_position(node, call)
+                    rest = _joint_position(node, call, 5.0, "while the arm rests")
                     command = JointState(name=["joint"], position=[rest])
                     command.header.stamp = s_to_stamp(node.get_clock().now().nanoseconds * 1e-9)
                     commands.publish(command)
@@ -194,31 +194,19 @@ def run_rig(
     return bags
 
 
-def _wait_ready(node: Any, call: ServiceCaller) -> None:
-    got: list[bool] = []
-    sub = node.create_subscription(JointState, "/joint_states", lambda _m: got.append(True), 10)
-    deadline = time.monotonic() + 20.0
-    while not got and time.monotonic() < deadline:
-        call.check()
-        time.sleep(0.05)
-    node.destroy_subscription(sub)
-    if not got:
-        raise RigRunError("actuator_driver published no /joint_states within 20 s")
-
-
-def _rest_position(node: Any, call: ServiceCaller) -> float:
-    """The arm's position now (one /joint_states sample)."""
+def _joint_position(node: Any, call: ServiceCaller, timeout_s: float, what: str) -> float:
+    """The arm's position now: the next /joint_states sample (RigRunError naming ``what``)."""
     got: list[float] = []
     sub = node.create_subscription(
         JointState, "/joint_states", lambda m: got.append(float(m.position[0])), 10
     )
-    deadline = time.monotonic() + 5.0
+    deadline = time.monotonic() + timeout_s
     while not got and time.monotonic() < deadline:
         call.check()
         time.sleep(0.01)
     node.destroy_subscription(sub)
     if not got:
-        raise RigRunError("no /joint_states while the arm rests")
+        raise RigRunError(f"actuator_driver published no /joint_states {what}")
     return got[-1]
 
 

@@ -25,7 +25,12 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from transparency_ros.analysis.discrepancy.effects import Effect, library
+from transparency_ros.analysis.discrepancy.effects import (
+    Cogging,
+    Effect,
+    inverse_dynamics_residual,
+    library,
+)
 from transparency_ros.analysis.discrepancy.model import (
     FloatArray,
     NominalModel,
@@ -250,8 +255,8 @@ class Discoverer:
                 effect=cand.name,
                 parameters={n: float(v) for n, v in zip(cand.param_names, x, strict=True)}
                 | (
-                    {"cycles_per_rev": float(getattr(cand, "cycles_per_rev", 0))}
-                    if cand.name == "cogging"
+                    {"cycles_per_rev": float(cand.cycles_per_rev)}
+                    if isinstance(cand, Cogging)
                     else {}
                 ),
                 confidence_interval={n: c for n, c in zip(cand.param_names, ci, strict=True)},
@@ -300,10 +305,6 @@ class Discoverer:
         torque effects, over whole trials, Welch spectrum) has most power above 0.5 Hz."""
         from scipy.signal import welch  # noqa: PLC0415
 
-        from transparency_ros.analysis.discrepancy.effects import (  # noqa: PLC0415
-            inverse_dynamics_residual,
-        )
-
         model = self.model
         for effect, p in zip(effects, params, strict=True):
             model = effect.adjust(model, p)
@@ -350,7 +351,7 @@ class Discoverer:
 
 def _size(effect: Effect, x: FloatArray) -> int:
     """Parameters an effect spends, its discrete choices included (cogging's period)."""
-    return int(x.size) + (1 if hasattr(effect, "cycles_per_rev") else 0)
+    return int(x.size) + (1 if isinstance(effect, Cogging) else 0)
 
 
 DRIFT_MIN = 0.2  # a nominal value counts as wrong when off by more than 20 %

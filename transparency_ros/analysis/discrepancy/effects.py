@@ -44,7 +44,7 @@ def inverse_dynamics_residual(
     return np.concatenate(qs), np.concatenate(qds), np.concatenate(res)
 
 
-@dataclass(frozen=True)
+@dataclass
 class Effect:
     name: str
     param_names: tuple[str, ...]
@@ -98,7 +98,7 @@ class Cogging(Effect):
 
     def __init__(self, cycles_per_rev: int = 0) -> None:
         super().__init__("cogging", ("amplitude_nm", "phase_rad"), (0.0, -math.pi), (5.0, math.pi))
-        object.__setattr__(self, "cycles_per_rev", cycles_per_rev)
+        self.cycles_per_rev = cycles_per_rev
 
     cycles_per_rev: int
 
@@ -111,7 +111,7 @@ class Cogging(Effect):
             explained = float(np.sum((basis @ np.array([a, b])) ** 2))
             if explained > best[0]:
                 best = (explained, n, math.hypot(a, b), math.atan2(b, a))
-        object.__setattr__(self, "cycles_per_rev", best[1])
+        self.cycles_per_rev = best[1]  # the period is chosen here, from the data
         return np.array([min(best[2], 5.0), best[3]])
 
     def torque(self, q: FloatArray, qd: FloatArray, p: FloatArray) -> FloatArray:

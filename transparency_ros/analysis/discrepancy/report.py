@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from transparency_ros.analysis.discrepancy.discover import Report, _phases, split_trials
-from transparency_ros.analysis.discrepancy.effects import library
+from transparency_ros.analysis.discrepancy.effects import Cogging, library
 from transparency_ros.analysis.discrepancy.model import NominalModel, Trial, make_windows, simulate
 
 
@@ -25,8 +25,8 @@ def write_report(
     effects, params = [], []
     for f in report.findings:
         effect = by_name[f.effect]
-        if f.effect == "cogging":
-            object.__setattr__(effect, "cycles_per_rev", int(f.parameters["cycles_per_rev"]))
+        if isinstance(effect, Cogging):
+            effect.cycles_per_rev = int(f.parameters["cycles_per_rev"])
         effects.append(effect)
         params.append(np.array([f.parameters[n] for n in effect.param_names]))
     nominal = simulate(model, [], [], w)
