@@ -14,7 +14,12 @@ from pathlib import Path
 from sensor_msgs.msg import JointState
 
 from transparency_ros.ros.conversions import stamp_to_s
-from transparency_ros.ros.harness import Listener, start_node, stop_node
+from transparency_ros.ros.harness import (
+    Listener,
+    driver_left_motor_enabled,
+    start_node,
+    stop_node,
+)
 
 
 @dataclass(frozen=True)
@@ -59,7 +64,7 @@ def run_driver_demo(
     rate = (len(window) - 1) / (window[-1][0] - window[0][0]) if len(window) > 1 else 0.0
     t0 = samples[start][0]
     trace = [(t - t0, p, v, e) for t, p, v, e in samples[max(0, start - 100) :]]
-    disabled = "motor enabled at exit: False" in log
+    disabled = bool(log) and driver_left_motor_enabled(log) is None
     tail = "\n".join(line for line in log.splitlines() if "rosout" not in line)[-800:]
     return DriverDemoResult(rate, trace, target_rad, samples[-1][1], disabled, tail)
 
