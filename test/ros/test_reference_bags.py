@@ -19,7 +19,7 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
 from test.ros.conftest import Spinner, wait_for  # noqa: E402
-from transparency_ros.analysis.drop_eval import evaluate  # noqa: E402
+from transparency_ros.analysis.drop_eval import evaluate, offline_onset  # noqa: E402
 from transparency_ros.bag.reader import joint_series, open_bag  # noqa: E402
 from transparency_ros.ros.contact_estimator import ContactEstimatorNode  # noqa: E402
 from transparency_ros.ros.conversions import stamp_to_s  # noqa: E402
@@ -46,6 +46,22 @@ def test_eval_reproduces_the_stored_figures() -> None:
                 assert now[key] == pytest.approx(value, rel=1e-9, abs=1e-12), (row["bag"], key)
             elif key != "bag":
                 assert now[key] == value, (row["bag"], key)
+
+
+@pytest.mark.parametrize("bag", BAGS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_the_offline_estimator_gives_the_recorded_onset(bag: Path) -> None:
+    """What `transparency eval` uses for a bag without /contact: the node's core, replayed."""
+    with open_bag(bag) as source:
+        custom = source.custom_data
+        recorded = [stamp_to_s(m.header.stamp) for _, _, m in source.messages(["/contact"])]
+        onset = offline_onset(
+            source, float(custom["transparency.k_s"]), float(custom["transparency.threshold_rad"])
+        )
+    if not recorded:
+        assert onset is None
+        return
+    assert onset is not None
+    assert onset[0] == pytest.approx(recorded[0], abs=1e-6)
 
 
 @pytest.mark.parametrize("bag", BAGS, ids=lambda p: f"{p.parent.name}/{p.name}")

@@ -29,7 +29,13 @@ from transparency_ros.bag.reader import (
     scalar_series,
 )
 from transparency_ros.core.config import load_drop_test
-from transparency_ros.core.estimator import DetectorSettings, SchmittDetector
+from transparency_ros.core.estimator import (
+    DetectorSettings,
+    EstimatorGains,
+    EstimatorPipeline,
+    EventKind,
+    SchmittDetector,
+)
 
 CUSTOM_KEYS = (
     "transparency.actuator",
@@ -67,7 +73,7 @@ def _quadratic_velocity(t: np.ndarray, h: np.ndarray, at_s: float) -> float:
     return float(coef[1])  # d/dt at t = at_s
 
 
-def _offline_onset(bag: BagSource, k_s: float, threshold: float) -> tuple[float, float] | None:
+def offline_onset(bag: BagSource, k_s: float, threshold: float) -> tuple[float, float] | None:
     """(stamp, tau_hat) of the first onset of the estimator replayed on /joint_states."""
     states = joint_series(bag, "/joint_states")
     theta_d = 0.0
@@ -76,13 +82,19 @@ def _offline_onset(bag: BagSource, k_s: float, threshold: float) -> tuple[float,
         finite = np.isfinite(commands.position)
         if finite.any():
             theta_d = float(commands.position[finite][-1])
-    detector = SchmittDetector(
-        DetectorSettings(contact_onset=threshold, contact_release=threshold / 2)
+    # the estimator node's own core, as it would have run on these samples
+    pipeline = EstimatorPipeline(
+        gains=EstimatorGains(k_s_nm_per_rad=k_s),
+        detector=SchmittDetector(
+            DetectorSettings(contact_onset=threshold, contact_release=threshold / 2)
+        ),
+        default_theta_d_rad=theta_d,
     )
-    for stamp, position in zip(states.stamp_s, states.position, strict=True):
-        error = theta_d - float(position)
-        for event in detector.update("joint", float(stamp), error, k_s * error):
-            if event.kind == "contact":
+    velocity = np.nan_to_num(states.velocity)
+    for stamp, position, speed in zip(states.stamp_s, states.position, velocity, strict=True):
+        _, events = pipeline.sample(float(stamp), ["joint"], [float(position)], [float(speed)])
+        for event in events:
+            if event.kind is EventKind.CONTACT_ONSET:
                 return event.stamp_s, event.torque_nm
     return None
 
@@ -124,7 +136,7 @@ def evaluate_trial(path: str | Path, fit_window_s: float = 0.015) -> TrialMetric
                     onset, source = (stamp, float(msg.wrench.torque.z)), "recorded /contact"
                     break
         if onset is None:
-            onset = _offline_onset(bag, k_s, threshold)
+            onset = offline_onset(bag, k_s, threshold)
             source = "offline estimator" if onset is not None else "none"
     base = TrialMetrics(str(path), actuator, height, mass, t_t, energy, v_t, False, source,
                         None, None, None, None, None)  # fmt: skip
