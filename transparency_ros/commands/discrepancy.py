@@ -13,6 +13,7 @@ import numpy as np
 from transparency_ros.core.errors import ConfigError
 
 TRIAL_KIND = "torque_driven"
+DROP_KIND = "drop_test"
 
 
 def register(subparsers: Any) -> None:
@@ -107,34 +108,16 @@ def run_import(args: argparse.Namespace) -> int:
 
 
 def run_discrepancy(args: argparse.Namespace) -> int:
-    from transparency_ros.analysis.discrepancy.discover import discover  # noqa: PLC0415
-    from transparency_ros.analysis.discrepancy.model import Trial, load_nominal  # noqa: PLC0415
-    from transparency_ros.bag.reader import find_bags, joint_series, open_bag  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.discover import Discoverer  # noqa: PLC0415
 
-    model = load_nominal(args.nominal)
-    trials = []
-    for bag_path in find_bags(args.bags):
-        with open_bag(bag_path) as bag:
-            kind = bag.custom_data.get("transparency.trial", TRIAL_KIND)
-            if kind != TRIAL_KIND:
-                raise ConfigError(
-                    f"{bag_path}: {kind} campaigns are not supported yet "
-                    "(only 1-DoF torque-driven recordings)"
-                )
-            s = joint_series(bag, "/joint_states")
-        trials.append(
-            Trial(bag_path.name, s.stamp_s - s.stamp_s[0], s.position, s.velocity, s.effort)
-        )
-    report = discover(
-        model,
-        trials,
-        window_s=args.window,
-        progress=lambda text: print(text, file=sys.stderr, flush=True),
-    )
+    problem = _problem(args)
+    report = Discoverer(
+        problem, progress=lambda text: print(text, file=sys.stderr, flush=True)
+    ).run()
     if args.report:
         from transparency_ros.analysis.discrepancy.report import write_report  # noqa: PLC0415
 
-        for path in write_report(Path(args.report), model, trials, report, args.window):
+        for path in write_report(Path(args.report), problem, report):
             print(f"wrote {path}", file=sys.stderr)
     if args.json:
         json.dump(report.as_dict(), sys.stdout, indent=2)
@@ -155,3 +138,48 @@ def run_discrepancy(args: argparse.Namespace) -> int:
         print("no significant discrepancy: the nominal model explains the recordings")
     print(f"final held-out RMSE: {report.final_heldout_rmse:.4g} rad ({report.seconds:.1f} s)")
     return 0
+
+
+def _problem(args: argparse.Namespace) -> Any:
+    """The problem of the bags' kind: all bags of one run are of one kind."""
+    from transparency_ros.analysis.discrepancy.discover import (  # noqa: PLC0415
+        TorqueDrivenProblem,
+    )
+    from transparency_ros.analysis.discrepancy.model import Trial, load_nominal  # noqa: PLC0415
+    from transparency_ros.bag.reader import find_bags, joint_series, open_bag  # noqa: PLC0415
+
+    bags = find_bags(args.bags)
+    kinds: dict[str, list[Path]] = {}
+    for bag_path in bags:
+        with open_bag(bag_path) as bag:
+            kind = bag.custom_data.get("transparency.trial", TRIAL_KIND)
+        kinds.setdefault(kind, []).append(bag_path)
+    if len(kinds) > 1:
+        listed = "; ".join(f"{k}: {', '.join(p.name for p in v[:3])}" for k, v in kinds.items())
+        raise ConfigError(f"the bags are of different kinds ({listed}); analyse one kind at a time")
+    kind = next(iter(kinds))
+    if kind == DROP_KIND:
+        from transparency_ros.analysis.discrepancy.drop import (  # noqa: PLC0415
+            DropProblem,
+            load_drop_nominal,
+            load_drop_trial,
+        )
+
+        trials = [load_drop_trial(b) for b in bags]
+        return DropProblem(trials, load_drop_nominal(args.nominal, trials))
+    if kind != TRIAL_KIND:
+        raise ConfigError(
+            f"{kinds[kind][0]}: transparency.trial = {kind!r}; the tool reads "
+            f"{TRIAL_KIND!r} and {DROP_KIND!r} recordings"
+        )
+    if args.nominal is None:
+        raise ConfigError("torque-driven recordings need --nominal SPEC.yaml")
+    model = load_nominal(args.nominal)
+    trials = []
+    for bag_path in bags:
+        with open_bag(bag_path) as bag:
+            s = joint_series(bag, "/joint_states")
+        trials.append(
+            Trial(bag_path.name, s.stamp_s - s.stamp_s[0], s.position, s.velocity, s.effort)
+        )
+    return TorqueDrivenProblem(model, trials, window_s=args.window)

@@ -1,17 +1,21 @@
 """The loop: simulate -> residual -> locate -> explain -> model -> select, until nothing is left.
 
+The loop is the same for every kind of recording; a *problem* (:class:`Problem`) says how to
+simulate its trials and compare them: :class:`TorqueDrivenProblem` for 1-DoF torque-driven
+recordings, :class:`~transparency_ros.analysis.discrepancy.drop.DropProblem` for drop tests.
+
 Trials are split into fitting and held-out sets (whole trials, never samples of one trial). Each
 round fits every remaining candidate effect (its own parameters, bounded least squares on the
-windowed simulation error of the fitting trials, the effects found so far kept), scores it on the
+simulation error of the fitting trials, the effects found so far kept), scores it on the
 held-out trials, and keeps the best only if it removes at least ``min_improvement`` of the
-held-out error above the noise floor (what position noise and the initial-velocity error alone
-would cause), at least a tenth of the floor in absolute terms, and the held-out information
-criterion (n log(RSS/n) + 2k) improves by more than 10. A kept
-effect gets its parameters with 95 % confidence intervals (from the fit's Jacobian), where it
-acted (the motion phase whose residual it reduced most, and the trial and time window of the
-largest reduction) and the evidence. When no candidate passes, the held-out residual is checked
-for structure left (phase RMS against the noise floor, and its dominant frequency): what is left
-is reported as ``unexplained``, never forced onto a label.
+held-out error above the noise floor (what sensor noise alone would cause), at least a tenth of
+the floor in absolute terms, and the held-out information criterion (n log(RSS/n) + 2k)
+improves by more than 10. A kept effect gets its parameters with 95 % confidence intervals
+(from the fit's Jacobian), where it acted (the motion phase whose residual it reduced most, and
+the trial and time window of the largest reduction) and the evidence. When no candidate
+passes, the held-out residual is checked for structure left (phase RMS against the noise
+floor, and its dominant frequency): what is left is reported as ``unexplained``, never forced
+onto a label.
 """
 
 from __future__ import annotations
@@ -20,13 +24,13 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from transparency_ros.analysis.discrepancy.effects import (
-    Cogging,
     Effect,
     inverse_dynamics_residual,
     library,
@@ -66,6 +70,7 @@ class Report:
     heldout_rmse_nominal: float = math.nan
     final_heldout_rmse: float = math.nan
     seconds: float = 0.0
+    fitted: list[tuple[Any, FloatArray]] = field(default_factory=list)  # effects as found
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -99,7 +104,7 @@ def split_trials(
     return fit, held
 
 
-def _phases(w: Windows) -> dict[str, FloatArray]:
+def window_phases(w: Windows) -> dict[str, FloatArray]:
     speed = np.abs(w.qd)
     sign_change = np.zeros_like(speed, dtype=bool)
     sign_change[:, 1:] = np.sign(w.qd[:, 1:]) != np.sign(w.qd[:, :-1])
@@ -117,29 +122,197 @@ def _phases(w: Windows) -> dict[str, FloatArray]:
     }
 
 
-class Discoverer:
+class Problem(Protocol):
+    """What the loop needs from a kind of recording (torque-driven windows, drop tests)."""
+
+    nominal: dict[str, float]
+    split: dict[str, list[str]]
+    min_improvement: float  # share of the error above the noise floor an effect must remove
+
+    def candidates(self) -> list[Any]: ...
+
+    def initial(self, effect: Any) -> FloatArray: ...
+
+    def error(self, effects: Sequence[Any], params: Sequence[FloatArray], held: bool) -> FloatArray:
+        """Simulation error [rad] of every compared sample, 1-D, fitting or held-out trials."""
+        ...
+
+    def error_many(
+        self,
+        effects: Sequence[Any],
+        params: Sequence[FloatArray],
+        new: Any,
+        xs: Sequence[FloatArray],
+        held: bool,
+    ) -> list[FloatArray]:
+        """:meth:`error` with ``new`` added at each of the parameter values ``xs``."""
+        ...
+
+    def phases(self) -> dict[str, npt.NDArray[np.bool_]]:
+        """Motion phase of every held-out error element."""
+        ...
+
+    def segments(self) -> tuple[npt.NDArray[np.int64], list[tuple[str, float, float]]]:
+        """Segment index of every held-out error element; per segment (trial, t0, t1)."""
+        ...
+
+    def noise_floor(self) -> float: ...
+
+    def residual_peak_hz(self, effects: Sequence[Any], params: Sequence[FloatArray]) -> float: ...
+
+    def trace(
+        self, effects: Sequence[Any], params: Sequence[FloatArray], segment: int
+    ) -> Trace: ...
+
+
+@dataclass(frozen=True)
+class Trace:
+    """One held-out segment, recorded against nominal and final model, for a plot."""
+
+    title: str
+    t: FloatArray
+    recorded: FloatArray
+    nominal: FloatArray
+    final: FloatArray
+    ylabel: str
+
+
+class TorqueDrivenProblem:
+    """1-DoF torque-driven recordings, simulated in windows of ``window_s`` (multiple shooting)."""
+
     def __init__(
         self,
         model: NominalModel,
         trials: Sequence[Trial],
         *,
         window_s: float = 0.1,
-        min_improvement: float = 0.5,
         candidates: Sequence[Effect] | None = None,
-        progress: Callable[[str], None] = lambda _t: None,
     ) -> None:
         self.model = model
         self.fit_trials, self.held_trials = split_trials(trials)
         self.w_fit = make_windows(self.fit_trials, window_s, stride_s=window_s)
         self.w_held = make_windows(self.held_trials, window_s, stride_s=window_s)
-        self.min_improvement = min_improvement
-        self.candidates = list(candidates) if candidates is not None else library()
-        self.progress = progress
+        self._candidates = list(candidates) if candidates is not None else library()
+        self.min_improvement = 0.5
+        self.nominal = model.as_dict()
+        self.split = {
+            "fit": [t.name for t in self.fit_trials],
+            "heldout": [t.name for t in self.held_trials],
+        }
 
-    def _error(
-        self, effects: Sequence[Effect], params: Sequence[FloatArray], w: Windows
+    def candidates(self) -> list[Effect]:
+        return list(self._candidates)
+
+    def initial(self, effect: Effect) -> FloatArray:
+        return effect.initial(self.model, self.fit_trials)
+
+    def error(
+        self, effects: Sequence[Effect], params: Sequence[FloatArray], held: bool
     ) -> FloatArray:
-        return simulate(self.model, effects, params, w) - w.q
+        w = self.w_held if held else self.w_fit
+        return (simulate(self.model, effects, params, w) - w.q).ravel()
+
+    def error_many(
+        self,
+        effects: Sequence[Effect],
+        params: Sequence[FloatArray],
+        new: Effect,
+        xs: Sequence[FloatArray],
+        held: bool,
+    ) -> list[FloatArray]:
+        return [self.error([*effects, new], [*params, x], held) for x in xs]
+
+    def phases(self) -> dict[str, npt.NDArray[np.bool_]]:
+        return {name: mask.ravel() for name, mask in window_phases(self.w_held).items()}
+
+    def segments(self) -> tuple[npt.NDArray[np.int64], list[tuple[str, float, float]]]:
+        w = self.w_held
+        n, steps = w.q.shape
+        labels = []
+        for i in range(n):
+            trial = self.held_trials[int(w.trial_index[i])]
+            t0 = float(w.t[i, 0] - trial.t[0])
+            labels.append((trial.name, t0, t0 + steps * w.dt))
+        return np.repeat(np.arange(n, dtype=np.int64), steps), labels
+
+    def noise_floor(self) -> float:
+        """The window error noise alone causes: position noise (incl. quantization) plus the
+        error of the smoothed initial velocity integrated over a window (a quadratic fit over
+        n samples has slope variance 12 sigma^2 / (n (n^2 - 1) dt^2))."""
+        w = self.w_fit
+        q_noise = position_noise(w.q)
+        n = max(5, round(0.01 / w.dt) | 1)
+        v_noise = q_noise * math.sqrt(12 / (n * (n * n - 1))) / w.dt
+        span = w.q.shape[1] * w.dt
+        return math.hypot(q_noise, v_noise * span / math.sqrt(3))
+
+    def residual_peak_hz(self, effects: Sequence[Effect], params: Sequence[FloatArray]) -> float:
+        """Frequency [Hz] where the held-out torque residual (inverse dynamics with the found
+        torque effects, over whole trials, Welch spectrum) has most power above 0.5 Hz."""
+        model = self.model
+        for effect, p in zip(effects, params, strict=True):
+            model = effect.adjust(model, p)
+        best_f, best_p = math.nan, -1.0
+        for trial in self.held_trials:
+            q, qd, r = inverse_dynamics_residual(model, [trial])
+            for effect, p in zip(effects, params, strict=True):
+                r = r - np.broadcast_to(effect.torque(q, qd, p), r.shape)
+            f, power = spectrum_peak(r, 1.0 / trial.dt)
+            if power > best_p:
+                best_f, best_p = f, power
+        return best_f
+
+    def trace(self, effects: Sequence[Effect], params: Sequence[FloatArray], segment: int) -> Trace:
+        w = self.w_held
+        nominal = simulate(self.model, [], [], w)[segment]
+        final = simulate(self.model, effects, params, w)[segment]
+        trial = self.held_trials[int(w.trial_index[segment])]
+        return Trace(
+            f"{trial.name}, t = {w.t[segment, 0] - trial.t[0]:.2f} s",
+            w.t[segment] - w.t[segment, 0],
+            w.q[segment],
+            nominal,
+            final,
+            "position [rad]",
+        )
+
+
+def position_noise(q: FloatArray) -> float:
+    """Standard deviation of white position noise (from second differences) and quantization
+    (the smallest step), rows of ``q`` being separate recordings."""
+    diffs = np.abs(np.diff(q, axis=-1))
+    step = float(np.min(diffs[diffs > 0])) if np.any(diffs > 0) else 0.0
+    white = float(np.median(np.abs(np.diff(q, n=2, axis=-1)))) / 0.6745 / math.sqrt(6)
+    return math.hypot(white, step / math.sqrt(12))
+
+
+def spectrum_peak(signal: FloatArray, fs: float, above_hz: float = 0.5) -> tuple[float, float]:
+    """(frequency, power) of the largest Welch peak of ``signal`` above ``above_hz``."""
+    from scipy.signal import welch  # noqa: PLC0415
+
+    if signal.size < 8:
+        return math.nan, -1.0
+    f, power = welch(signal - signal.mean(), fs=fs, nperseg=min(signal.size, round(4 * fs)))
+    keep = f > above_hz
+    if not keep.any():
+        return math.nan, -1.0
+    i = int(np.argmax(power[keep]))
+    return float(f[keep][i]), float(power[keep][i])
+
+
+class Discoverer:
+    def __init__(
+        self,
+        problem: Problem,
+        *,
+        min_improvement: float | None = None,
+        progress: Callable[[str], None] = lambda _t: None,
+    ) -> None:
+        self.problem = problem
+        self.min_improvement = (
+            problem.min_improvement if min_improvement is None else min_improvement
+        )
+        self.progress = progress
 
     @staticmethod
     def _rmse(err: FloatArray) -> float:
@@ -151,24 +324,38 @@ class Discoverer:
         return n * math.log(max(float(np.sum(err**2)), 1e-300) / n) + 2 * k
 
     def _fit(
-        self, effects: list[Effect], params: list[FloatArray], new: Effect
+        self, effects: list[Any], params: list[FloatArray], new: Any
     ) -> tuple[FloatArray, Any]:
-        x0 = np.clip(new.initial(self.model, self.fit_trials), new.lower, new.upper)
+        problem = self.problem
+        x0 = np.clip(problem.initial(new), new.lower, new.upper)
         if not new.fittable:
             return x0, None
-        w = self.w_fit
+
+        def many(xs: Sequence[FloatArray]) -> list[FloatArray]:
+            # one batched simulation where the problem offers it (drop tests)
+            return list(problem.error_many(effects, params, new, xs, False))
 
         def residual(x: FloatArray) -> FloatArray:
-            return self._error([*effects, new], [*params, x], w).ravel()
+            return many([x])[0]
+
+        lower, upper = np.asarray(new.lower, dtype=float), np.asarray(new.upper, dtype=float)
+
+        def jacobian(x: FloatArray) -> FloatArray:
+            # forward differences of step 1e-3 max(1, |x|), backwards at the upper bound
+            h = 1e-3 * np.maximum(1.0, np.abs(x))
+            h = np.where(x + h > upper, -h, h)
+            shifted = [x + np.eye(x.size)[i] * h[i] for i in range(x.size)]
+            base, *moved = many([x, *shifted])
+            return np.stack([(m - base) / h[i] for i, m in enumerate(moved)], axis=1)
 
         if x0.size == 1:
             # one parameter: scan its range first. Effects with a threshold (stiction,
             # saturation) change the error in steps, where finite-difference gradients are zero.
-            grid = np.unique(np.r_[np.linspace(new.lower[0], new.upper[0], GRID_POINTS), x0])
-            costs = [float(np.sum(residual(np.array([g])) ** 2)) for g in grid]
+            grid = np.unique(np.r_[np.linspace(lower[0], upper[0], GRID_POINTS), x0])
+            costs = [float(np.sum(r**2)) for r in many([np.array([g]) for g in grid])]
             x0 = np.array([grid[int(np.argmin(costs))]])
         result = least_squares(
-            residual, x0, bounds=(new.lower, new.upper), x_scale="jac", max_nfev=60, diff_step=1e-3
+            residual, x0, jac=jacobian, bounds=(lower, upper), x_scale="jac", max_nfev=60
         )
         if float(np.sum(result.fun**2)) > float(np.sum(residual(x0) ** 2)):
             result.x = x0  # the local refinement did not help: keep the scanned value
@@ -187,42 +374,38 @@ class Discoverer:
         return [(float(v - h), float(v + h)) for v, h in zip(x, half, strict=True)]
 
     def _where(self, before: FloatArray, after: FloatArray) -> dict[str, Any]:
-        phases = _phases(self.w_held)
         gains = {}
-        for name, mask in phases.items():
+        for name, mask in self.problem.phases().items():
             if mask.any():
                 gains[name] = float(
                     np.sqrt(np.mean(before[mask] ** 2)) - np.sqrt(np.mean(after[mask] ** 2))
                 )
         phase = max(gains, key=lambda k: gains[k]) if gains else "all"
-        per_window = np.sqrt(np.mean(before**2, axis=1)) - np.sqrt(np.mean(after**2, axis=1))
-        i = int(np.argmax(per_window))
-        trial = self.held_trials[int(self.w_held.trial_index[i])]
-        t0 = float(self.w_held.t[i, 0] - trial.t[0])
+        segment, labels = self.problem.segments()
+        count = np.bincount(segment, minlength=len(labels)).clip(1)
+        per_segment = np.sqrt(np.bincount(segment, before**2, len(labels)) / count) - np.sqrt(
+            np.bincount(segment, after**2, len(labels)) / count
+        )
+        trial, t0, t1 = labels[int(np.argmax(per_segment))]
         return {
             "phase": phase,
             "rmse_reduction_by_phase_rad": gains,
-            "trial": trial.name,
-            "window_s": [round(t0, 4), round(t0 + self.w_held.t.shape[1] * self.w_held.dt, 4)],
+            "trial": trial,
+            "window_s": [round(t0, 4), round(t1, 4)],
         }
 
     def run(self) -> Report:
         started = time.perf_counter()
-        report = Report(
-            self.model.as_dict(),
-            {
-                "fit": [t.name for t in self.fit_trials],
-                "heldout": [t.name for t in self.held_trials],
-            },
-        )
-        effects: list[Effect] = []
+        problem = self.problem
+        report = Report(problem.nominal, problem.split)
+        effects: list[Any] = []
         params: list[FloatArray] = []
-        held_err = self._error(effects, params, self.w_held)
+        held_err = problem.error(effects, params, True)
         report.heldout_rmse_nominal = self._rmse(held_err)
-        remaining = list(self.candidates)
-        floor = self._noise_floor()
+        remaining = problem.candidates()
+        floor = problem.noise_floor()
         while remaining:
-            passing: list[tuple[float, Effect, FloatArray, Any, FloatArray, float]] = []
+            passing: list[tuple[float, Any, FloatArray, Any, FloatArray, float]] = []
             base_rmse, base_aic = (
                 self._rmse(held_err),
                 self._aic(held_err, sum(p.size for p in params)),
@@ -230,7 +413,7 @@ class Discoverer:
             for cand in remaining:
                 self.progress(f"trying {cand.name}")
                 x, result = self._fit(effects, params, cand)
-                err = self._error([*effects, cand], [*params, x], self.w_held)
+                err = problem.error([*effects, cand], [*params, x], True)
                 rmse = self._rmse(err)
                 aic = self._aic(err, sum(p.size for p in params) + _size(cand, x))
                 # the part of the error above the noise floor that this effect removes
@@ -238,8 +421,8 @@ class Discoverer:
                 gain = (base_rmse - rmse) / excess
                 if base_rmse - rmse < 0.1 * floor:
                     continue
-                if cand.name == "parameter_drift" and not _drifted(x):
-                    continue  # refitted values close to nominal: no wrong parameter to name
+                if not cand.meaningful(x):
+                    continue  # e.g. drift scales close to 1: no wrong parameter to name
                 if gain >= self.min_improvement and aic < base_aic - 10:
                     passing.append((rmse, cand, x, result, err, aic))
             if not passing:
@@ -254,11 +437,7 @@ class Discoverer:
             finding = Finding(
                 effect=cand.name,
                 parameters={n: float(v) for n, v in zip(cand.param_names, x, strict=True)}
-                | (
-                    {"cycles_per_rev": float(cand.cycles_per_rev)}
-                    if isinstance(cand, Cogging)
-                    else {}
-                ),
+                | cand.extra_parameters(x),
                 confidence_interval={n: c for n, c in zip(cand.param_names, ci, strict=True)},
                 where=self._where(held_err, err),
                 evidence=(
@@ -272,6 +451,7 @@ class Discoverer:
                 alternatives=alternatives,
             )
             report.findings.append(finding)
+            report.fitted.append((cand, x))
             self.progress(f"found {cand.name}: {finding.evidence}")
             effects.append(cand)
             params.append(x)
@@ -282,60 +462,21 @@ class Discoverer:
         report.seconds = time.perf_counter() - started
         return report
 
-    def _noise_floor(self) -> float:
-        """The window error noise alone causes: position noise (incl. quantization) plus the
-        error of the smoothed initial velocity integrated over a window (a quadratic fit over
-        n samples has slope variance 12 sigma^2 / (n (n^2 - 1) dt^2))."""
-        w = self.w_fit
-        diffs = np.abs(np.diff(w.q, axis=1))
-        step = float(np.min(diffs[diffs > 0])) if np.any(diffs > 0) else 0.0
-        q_noise = math.hypot(
-            float(np.median(np.abs(np.diff(w.q, n=2, axis=1)))) / 0.6745 / math.sqrt(6),
-            step / math.sqrt(12),
-        )
-        n = max(5, round(0.01 / w.dt) | 1)
-        v_noise = q_noise * math.sqrt(12 / (n * (n * n - 1))) / w.dt
-        span = w.q.shape[1] * w.dt
-        return math.hypot(q_noise, v_noise * span / math.sqrt(3))
-
-    def _torque_residual_peak(
-        self, effects: Sequence[Effect], params: Sequence[FloatArray]
-    ) -> float:
-        """Frequency [Hz] where the held-out torque residual (inverse dynamics with the found
-        torque effects, over whole trials, Welch spectrum) has most power above 0.5 Hz."""
-        from scipy.signal import welch  # noqa: PLC0415
-
-        model = self.model
-        for effect, p in zip(effects, params, strict=True):
-            model = effect.adjust(model, p)
-        best_f, best_p = math.nan, -1.0
-        for trial in self.held_trials:
-            q, qd, r = inverse_dynamics_residual(model, [trial])
-            for effect, p in zip(effects, params, strict=True):
-                r = r - np.broadcast_to(effect.torque(q, qd, p), r.shape)
-            fs = 1.0 / trial.dt
-            f, power = welch(r - r.mean(), fs=fs, nperseg=min(r.size, round(4 * fs)))
-            keep = f > 0.5
-            if keep.any() and float(power[keep].max()) > best_p:
-                best_p = float(power[keep].max())
-                best_f = float(f[keep][int(np.argmax(power[keep]))])
-        return best_f
-
     def _leftover(
-        self, err: FloatArray, effects: Sequence[Effect] = (), params: Sequence[FloatArray] = ()
+        self, err: FloatArray, effects: Sequence[Any] = (), params: Sequence[FloatArray] = ()
     ) -> list[dict[str, Any]]:
         """Structure the found effects do not explain: a phase whose residual is well above the
-        noise floor, with the frequency where the torque residual has most power."""
-        floor = self._noise_floor()
+        noise floor, with the frequency where the residual has most power."""
+        floor = self.problem.noise_floor()
         out = []
         peak: float | None = None
-        for name, mask in _phases(self.w_held).items():
+        for name, mask in self.problem.phases().items():
             if mask.sum() < 50:
                 continue
             rms = float(np.sqrt(np.mean(err[mask] ** 2)))
             if rms > 3 * floor:
                 if peak is None:
-                    peak = self._torque_residual_peak(effects, params)
+                    peak = self.problem.residual_peak_hz(effects, params)
                 out.append(
                     {
                         "where": {"phase": name},
@@ -343,25 +484,27 @@ class Discoverer:
                         "noise_floor_rad": floor,
                         "dominant_frequency_hz": peak,
                         "looks_like": f"residual {rms / floor:.0f}x the noise floor in phase "
-                        f"'{name}'; the torque residual peaks near {peak:.1f} Hz",
+                        f"'{name}'; the residual peaks near {peak:.1f} Hz",
                     }
                 )
         return out
 
 
-def _size(effect: Effect, x: FloatArray) -> int:
+def _size(effect: Any, x: FloatArray) -> int:
     """Parameters an effect spends, its discrete choices included (cogging's period)."""
-    return int(x.size) + (1 if isinstance(effect, Cogging) else 0)
+    return int(x.size) + int(effect.discrete_choices)
 
 
-DRIFT_MIN = 0.2  # a nominal value counts as wrong when off by more than 20 %
-
-
-def _drifted(scales: FloatArray) -> bool:
-    return bool(np.any(np.abs(np.asarray(scales) - 1.0) > DRIFT_MIN))
-
-
-def discover(model: NominalModel, trials: Sequence[Trial], **kwargs: Any) -> Report:
+def discover(
+    model: NominalModel,
+    trials: Sequence[Trial],
+    *,
+    window_s: float = 0.1,
+    candidates: Sequence[Effect] | None = None,
+    **kwargs: Any,
+) -> Report:
+    """The loop on 1-DoF torque-driven trials."""
     if len(trials) < 1:
         raise ModelError("no trials to analyse")
-    return Discoverer(model, trials, **kwargs).run()
+    problem = TorqueDrivenProblem(model, trials, window_s=window_s, candidates=candidates)
+    return Discoverer(problem, **kwargs).run()

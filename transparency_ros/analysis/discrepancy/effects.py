@@ -80,6 +80,16 @@ class Effect:
     def fittable(self) -> bool:
         return True
 
+    discrete_choices = 0  # choices made from the data besides the fitted parameters
+
+    def meaningful(self, p: FloatArray) -> bool:
+        """Whether fitted values name something (drift scales near 1 name nothing)."""
+        return True
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        """Values reported with the fitted parameters (cogging's period)."""
+        return {}
+
 
 class TorqueOffset(Effect):
     def __init__(self) -> None:
@@ -101,6 +111,10 @@ class Cogging(Effect):
         self.cycles_per_rev = cycles_per_rev
 
     cycles_per_rev: int
+    discrete_choices = 1
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        return {"cycles_per_rev": float(self.cycles_per_rev)}
 
     def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
         q, _, r = inverse_dynamics_residual(model, trials)
@@ -225,10 +239,20 @@ class ParameterDrift(Effect):
     def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
         return np.ones(4)
 
+    def meaningful(self, p: FloatArray) -> bool:
+        return drifted(p)
+
     def adjust(self, model: NominalModel, p: FloatArray) -> NominalModel:
         return replace(
             model, **{t: getattr(model, t) * float(s) for t, s in zip(self.TERMS, p, strict=True)}
         )
+
+
+DRIFT_MIN = 0.2  # a nominal value counts as wrong when off by more than 20 %
+
+
+def drifted(scales: FloatArray) -> bool:
+    return bool(np.any(np.abs(np.asarray(scales) - 1.0) > DRIFT_MIN))
 
 
 def library() -> list[Effect]:

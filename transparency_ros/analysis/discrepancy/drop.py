@@ -1,0 +1,841 @@
+"""Drop tests (Sec. 3.1) for the discrepancy tool: the paper's contact model as the nominal model.
+
+Nominal model (eq. 2, Table 1): the shuttle falls freely from its release; at contact an
+instantaneous, perfectly inelastic collision joins it to the arm, and from then on one body of
+inertia J_r + J_arm + m_s r^2 turns under the impedance k_s (theta_d - theta), viscous drag b_v
+and Coulomb friction tau_coul (stick-slip, breakaway at tau_coul). The shuttle is weightless on
+the arm, the rail has no friction, the gearbox no backlash, the arm is rigid and the encoder
+exact: everything eq. (2) leaves out is a candidate effect, and each one changes exactly the
+piece of this simulator where its physics acts:
+
+* ``payload_gravity``: the shuttle's weight m_s g r cos(theta) loads the arm while they touch;
+* ``restitution``: impacts are elastic with coefficient e; the shuttle flies off, falls back
+  and strikes again, until the bounces die out (approach slower than 5 cm/s: it stays);
+* ``impact_speed_loss``: rail friction brakes the shuttle (it arrives slower than free fall);
+* ``structural_compliance``: the contact is a stiff spring, not an instant collision;
+* ``backlash``: a dead band between the motor (encoder) and the arm;
+* ``stiction``, ``torque_offset``, ``parameter_drift`` (J_r, b_v, tau_coul), ``sensor_delay``
+  and ``quantization`` (of the encoder), as for the torque-driven model.
+
+Each trial is compared in two pieces (multiple shooting, so an error in one does not swamp the
+other): the fall, from the release to 3 ms before contact (the shuttle height; the release time
+is fitted to the first 30 ms of the fall), and the impact, from the recorded state 3 ms before
+contact to 0.25 s after (encoder position and shuttle height). Heights are compared as the arm
+angle they correspond to (height / r), so every error is in rad. All trials of a problem are
+integrated together, vectorised over trials, with a fixed step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+
+from transparency_ros.analysis.discrepancy.discover import (
+    Trace,
+    position_noise,
+    spectrum_peak,
+)
+from transparency_ros.analysis.discrepancy.effects import drifted
+from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
+from transparency_ros.core.config import finite_number, get_actuator, load_drop_test
+from transparency_ros.core.errors import ConfigError, ModelError
+
+BoolArray = npt.NDArray[np.bool_]
+STEP_S = 5e-4  # integration step (instant collisions)
+SPRING_STEP_S = 2e-4  # when the contact is a spring (omega dt <= 0.3 up to 1e6 N/m)
+LEAD_S = 0.003  # the impact piece starts this long before the recorded contact
+AFTER_S = 0.25  # and lasts this long after it
+FALL_FIT_S = 0.03  # first part of the fall used to find the release time
+GLUE_SPEED_M_S = 0.05  # a bounce slower than this ends the bouncing
+PHASES = ("before_contact", "impact", "deflection", "rebound", "reversal", "stuck")
+
+
+# ----------------------------------------------------------------------------- data
+
+
+@dataclass(frozen=True)
+class DropTrial:
+    """One drop-test bag, times in seconds from the bag's first sample."""
+
+    name: str
+    actuator: str
+    t_q: FloatArray  # encoder samples
+    q: FloatArray
+    t_h: FloatArray  # DAQ samples
+    height: FloatArray  # shuttle contact face above the tip at rest [m]
+    force: FloatArray  # load cell [N]
+    theta_d: float
+    k_s: float
+    mass_kg: float
+    arm_m: float
+    arm_inertia_kgm2: float
+    contact_s: float  # first load-cell sample above the threshold
+    contact_end_s: float  # first sample after it back below the threshold
+    release_s: float
+    held_height_m: float
+
+    @property
+    def start_s(self) -> float:
+        return self.contact_s - LEAD_S
+
+    @property
+    def end_s(self) -> float:
+        return min(self.contact_s + AFTER_S, float(self.t_q[-1]), float(self.t_h[-1]))
+
+
+def load_drop_trial(path: str | Path) -> DropTrial:
+    """A drop-test bag (README, "Bag contract") as a :class:`DropTrial`."""
+    from transparency_ros.analysis.drop_eval import CUSTOM_KEYS  # noqa: PLC0415
+    from transparency_ros.bag.errors import BagReadError  # noqa: PLC0415
+    from transparency_ros.bag.reader import joint_series, open_bag, scalar_series  # noqa: PLC0415
+
+    p = Path(path)
+    with open_bag(p) as bag:
+        custom = bag.require_custom(*CUSTOM_KEYS, "transparency.arm_inertia_kgm2")
+        try:
+            numbers = {k: float(custom[k]) for k in custom if k != "transparency.actuator"}
+            numbers = {k: v for k, v in numbers.items() if math.isfinite(v)}
+        except ValueError:
+            numbers = {}
+        missing = [
+            k for k in (*CUSTOM_KEYS[1:], "transparency.arm_inertia_kgm2") if k not in numbers
+        ]
+        if missing:
+            raise BagReadError(f"{p}: custom_data {missing} must be finite numbers")
+        states = joint_series(bag, "/joint_states")
+        force = scalar_series(
+            bag, "/load_cell", "geometry_msgs/msg/WrenchStamped", "wrench.force.z"
+        )
+        height = scalar_series(bag, "/shuttle/height", "geometry_msgs/msg/PointStamped", "point.z")
+        theta_d = 0.0
+        if "/joint_commands" in bag.topics:
+            commands = joint_series(bag, "/joint_commands")
+            finite = commands.position[np.isfinite(commands.position)]
+            theta_d = float(finite[-1]) if finite.size else 0.0
+    keep = np.isfinite(states.position)
+    t0 = float(min(states.stamp_s[0], height[0, 0]))
+    t_q, q = states.stamp_s[keep] - t0, states.position[keep]
+    t_h, h, f = height[:, 0] - t0, height[:, 1], np.interp(height[:, 0], force[:, 0], force[:, 1])
+    threshold = load_drop_test().contact_force_threshold_n
+    above = np.nonzero(f > threshold)[0]
+    if above.size == 0:
+        raise BagReadError(f"{p}: /load_cell never exceeds {threshold} N: no contact to analyse")
+    contact = float(t_h[above[0]])
+    below = np.nonzero((t_h > contact) & (f <= threshold))[0]
+    contact_end = float(t_h[below[0]]) if below.size else contact + 0.02
+    if q.size < 20 or np.count_nonzero(t_q < contact - LEAD_S) < 5:
+        raise BagReadError(f"{p}: /joint_states has too few samples before contact")
+    held, release = _release(t_h, h, contact, p)
+    return DropTrial(
+        name=f"{p.parent.name}/{p.name}",
+        actuator=custom["transparency.actuator"],
+        t_q=t_q,
+        q=q,
+        t_h=t_h,
+        height=h,
+        force=f,
+        theta_d=theta_d,
+        k_s=numbers["transparency.k_s"],
+        mass_kg=numbers["transparency.shuttle_mass_kg"],
+        arm_m=numbers["transparency.arm_length_m"],
+        arm_inertia_kgm2=numbers["transparency.arm_inertia_kgm2"],
+        contact_s=contact,
+        contact_end_s=contact_end,
+        release_s=release,
+        held_height_m=held,
+    )
+
+
+def _release(t: FloatArray, h: FloatArray, contact: float, where: Path) -> tuple[float, float]:
+    """(held height, release time): the fall is h0 - a/2 (t - t_r)^2, so sqrt(h0 - h) is linear
+    in t; a line through the first ``FALL_FIT_S`` of the fall gives t_r without assuming g."""
+    first = t < t[0] + 0.02
+    held = float(np.median(h[first]))
+    noise = float(np.median(np.abs(np.diff(h[first], n=2)))) / 0.6745 / math.sqrt(6)
+    gone = np.nonzero((h < held - max(6 * noise, 1e-4)) & (t < contact))[0]
+    if gone.size == 0 or np.count_nonzero(first) < 10:
+        raise ModelError(f"{where}: no hold before the release in /shuttle/height")
+    fit = (t >= t[gone[0]]) & (t < min(t[gone[0]] + FALL_FIT_S, contact - LEAD_S))
+    if np.count_nonzero(fit) < 10:
+        return held, float(t[gone[0]])
+    slope, intercept = np.polyfit(t[fit], np.sqrt(np.clip(held - h[fit], 0, None)), 1)
+    if slope <= 0:
+        raise ModelError(f"{where}: the shuttle does not fall after the release")
+    return held, float(-intercept / slope)
+
+
+# ----------------------------------------------------------------------------- physics
+
+
+@dataclass(frozen=True)
+class DropPhysics:
+    """What the simulator integrates; the nominal values are eq. (2)'s. Every value is a scalar
+    or an array over the simulated rows (trials, times the candidate values tried at once)."""
+
+    rotor_inertia_kgm2: FloatArray  # J_r
+    viscous_nms_per_rad: FloatArray  # b_v
+    coulomb_nm: FloatArray  # tau_coul
+    static_nm: FloatArray  # breakaway torque (nominal: tau_coul)
+    torque_offset_nm: FloatArray | float = 0.0
+    weight_torque_nm: FloatArray | float = 0.0  # m_s g r on the arm while touching
+    restitution: FloatArray | float = 0.0
+    stiffness_n_per_m: FloatArray | float = math.inf  # contact spring (inf: instant collision)
+    rail_friction_n: FloatArray | float = 0.0
+    backlash_rad: FloatArray | float = 0.0
+    delay_s: FloatArray | float = 0.0
+    encoder_step_rad: FloatArray | float = 0.0
+
+    def rows(self, n: int) -> DropPhysics:
+        """Every value as an array of ``n`` rows."""
+        return DropPhysics(
+            **{
+                f.name: np.broadcast_to(np.asarray(getattr(self, f.name), float), (n,))
+                for f in fields(self)
+            }
+        )
+
+
+def stack_physics(physics: Sequence[DropPhysics], n: int) -> DropPhysics:
+    """Several physics of ``n`` trials each as one of ``len(physics) * n`` rows."""
+    rows = [ph.rows(n) for ph in physics]
+    return DropPhysics(
+        **{f.name: np.concatenate([getattr(r, f.name) for r in rows]) for f in fields(DropPhysics)}
+    )
+
+
+@dataclass(frozen=True)
+class DropNominal:
+    """Nominal values per actuator (Table 1), overridable from a YAML spec."""
+
+    reflected_inertia_kgm2: dict[str, float]
+    viscous_nms_per_rad: dict[str, float]
+    coulomb_nm: dict[str, float]
+
+    def as_dict(self) -> dict[str, float]:
+        out = {}
+        for f in fields(self):
+            for actuator, value in getattr(self, f.name).items():
+                out[f"{actuator}.{f.name}"] = value
+        return out
+
+
+def load_drop_nominal(path: str | Path | None, trials: Sequence[DropTrial]) -> DropNominal:
+    """Eq. (2) with Table 1's J_r, b_v, tau_coul for each actuator of the trials; a YAML spec
+    may override any of ``reflected_inertia_kgm2``, ``viscous_nms_per_rad``, ``coulomb_nm``."""
+    actuators = sorted({t.actuator for t in trials})
+    values: dict[str, dict[str, float]] = {f.name: {} for f in fields(DropNominal)}
+    for name in actuators:
+        try:
+            a = get_actuator(name)
+        except (ConfigError, KeyError) as err:
+            raise ConfigError(f"actuator {name!r} of the bags is not in Table 1: {err}") from err
+        values["reflected_inertia_kgm2"][name] = a.reflected_inertia_kgm2
+        values["viscous_nms_per_rad"][name] = a.viscous_damping_nms_per_rad
+        values["coulomb_nm"][name] = a.coulomb_friction_nm
+    if path is not None:
+        p = Path(path)
+        try:
+            data = yaml.safe_load(p.read_text())
+        except (OSError, yaml.YAMLError) as err:
+            raise ConfigError(f"{p}: cannot read the nominal model: {err}") from err
+        if not isinstance(data, Mapping):
+            raise ConfigError(f"{p}: a nominal model is a mapping of terms")
+        unknown = sorted(set(data) - set(values))
+        if unknown:
+            raise ConfigError(f"{p}: unknown drop-test terms {unknown}; known: {list(values)}")
+        for key, value in data.items():
+            for name in actuators:
+                values[key][name] = finite_number(value, f"{p}: {key}")
+    return DropNominal(**values)
+
+
+@dataclass
+class Simulated:
+    """Simulated encoder position and shuttle height at the compared samples."""
+
+    q: list[FloatArray]
+    height: list[FloatArray]
+
+
+class DropSimulator:
+    """The impact pieces of a set of trials, integrated together."""
+
+    def __init__(self, trials: Sequence[DropTrial]) -> None:
+        self.trials = list(trials)
+        self.mass = np.array([t.mass_kg for t in trials])
+        self.arm = np.array([t.arm_m for t in trials])
+        self.arm_inertia = np.array([t.arm_inertia_kgm2 for t in trials])
+        self.k_s = np.array([t.k_s for t in trials])
+        self.theta_d = np.array([t.theta_d for t in trials])
+        self.q0 = np.array([_rest_position(t) for t in trials])
+        y0, v0 = zip(*(_shuttle_state(t) for t in trials), strict=True)
+        self.y0, self.v0 = np.array(y0), np.array(v0)
+        self.duration = max(t.end_s - t.start_s for t in trials) + 0.03
+
+    def run(self, ph: DropPhysics, tiles: int = 1) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(time from each trial's start, motor position, shuttle height), (rows, steps): the
+        trials ``tiles`` times over, row ``j * n_trials + i`` with physics row alike."""
+        n = len(self.trials) * tiles
+        ph = ph.rows(n)
+        finite = np.isfinite(ph.stiffness_n_per_m)
+        if finite.any() and not finite.all():
+            raise ModelError("rows simulated together must all have a contact spring, or none")
+        spring = bool(finite.all())
+        dt = SPRING_STEP_S if spring else STEP_S
+        steps = math.ceil(self.duration / dt) + 1
+        m, r, k_s = (np.tile(a, tiles) for a in (self.mass, self.arm, self.k_s))
+        theta_d = np.tile(self.theta_d, tiles)
+        j_r, j_a = ph.rotor_inertia_kgm2, np.tile(self.arm_inertia, tiles)
+        qm, wm = np.tile(self.q0, tiles), np.zeros(n)
+        ql, wl = qm.copy(), np.zeros(n)
+        y, v = np.tile(self.y0, tiles), np.tile(self.v0, tiles)
+        glued = np.zeros(n, dtype=bool)
+        half = ph.backlash_rad / 2
+        rigid = half == 0.0
+        engaged = rigid.copy()
+        any_backlash = not rigid.all()
+        if spring:
+            log_e = np.log(np.clip(ph.restitution, 1e-3, 0.999))
+            zeta = -log_e / np.sqrt(math.pi**2 + log_e**2)
+            damping = 2 * zeta * np.sqrt(ph.stiffness_n_per_m * m)
+        weight = ph.weight_torque_nm
+        out_q = np.empty((n, steps))
+        out_y = np.empty((n, steps))
+        for k in range(steps):
+            out_q[:, k], out_y[:, k] = qm, y
+            cos = np.cos(ql)
+            tip_y, tip_v = r * np.sin(ql), r * cos * wl
+            drive = k_s * (theta_d - qm) + ph.torque_offset_nm
+            # the shuttle's push on the arm, and the shuttle's own acceleration when free
+            touching = glued.copy()
+            if spring:
+                pen = tip_y - y
+                force = np.where(
+                    pen > 0,
+                    np.maximum(0.0, ph.stiffness_n_per_m * pen + damping * (tip_v - v)),
+                    0.0,
+                )
+                touching = pen > 0
+                load = -force * r * cos - np.where(touching, weight * cos, 0.0)
+                acc_y = np.where(touching, force / m - weight / (m * r), -GRAVITY)
+            else:
+                load = np.where(glued, -weight * cos, 0.0)
+                acc_y = np.full(n, -GRAVITY)
+            # rail friction against the shuttle's motion; a glued shuttle passes it to the arm
+            rail = ph.rail_friction_n * np.sign(v)
+            load = load - np.where(glued, rail * r * cos, 0.0)
+            acc_y = acc_y - rail / m
+            extra = np.where(glued, m * r * r, 0.0)  # eq. (2)'s m_s r^2
+            j_load = j_a + extra
+            # motor and arm: one body when engaged, else each on its own
+            w_joint = _friction_step(wm, j_r + j_load, drive + load, dt, ph)
+            if any_backlash:
+                w_motor = _friction_step(wm, j_r, drive, dt, ph)
+                w_arm = wl + load / j_load * dt
+                accel = (w_joint - wm) / dt
+                pull = j_load * accel - load  # torque the motor must exert on the arm
+                side = np.sign(ql - qm)
+                keeps = engaged & (rigid | ((side * pull) <= 0))
+                wm = np.where(keeps, w_joint, w_motor)
+                wl = np.where(keeps, w_joint, w_arm)
+                engaged = keeps
+            else:
+                wm = wl = w_joint
+            qm = qm + wm * dt
+            ql = np.where(rigid, qm, ql + wl * dt) if any_backlash else qm.copy()
+            if any_backlash:
+                gap = ql - qm
+                hit = ~engaged & (np.abs(gap) >= half)
+                side = np.sign(gap)
+                closing = (wl - wm) * side >= 0
+                ql = np.where(hit, qm + side * half, ql)
+                common = (j_r * wm + j_load * wl) / (j_r + j_load)
+                engage = hit & closing
+                wm = np.where(engage, common, wm)
+                wl = np.where(engage, common, wl)
+                engaged = engaged | engage
+            # the shuttle
+            if spring:
+                v = v + acc_y * dt
+                y = y + v * dt
+                continue
+            free = ~glued
+            v = np.where(free, v + acc_y * dt, v)
+            y = np.where(free, y + v * dt, r * np.sin(ql))
+            v = np.where(free, v, r * np.cos(ql) * wl)
+            tip_y, tip_v = r * np.sin(ql), r * np.cos(ql) * wl
+            strike = free & (y <= tip_y) & (v - tip_v < 0)
+            if strike.any():
+                j_hit = j_load + np.where(engaged, j_r, 0.0)
+                big_m = j_hit / (r * np.cos(ql)) ** 2  # the struck body's mass at the tip
+                u = v - tip_v
+                stays = np.abs(u) * ph.restitution < GLUE_SPEED_M_S
+                e = np.where(stays, 0.0, ph.restitution)
+                v_new = v - (1 + e) * big_m / (m + big_m) * u
+                tip_new = tip_v + (1 + e) * m / (m + big_m) * u
+                w_new = tip_new / (r * np.cos(ql))
+                v = np.where(strike, v_new, v)
+                y = np.where(strike, tip_y, y)
+                wl = np.where(strike, w_new, wl)
+                wm = np.where(strike & engaged, w_new, wm)
+                glued = glued | (strike & stays)
+        t = np.arange(steps) * dt
+        return t, out_q, out_y
+
+
+def _friction_step(
+    w: FloatArray, inertia: FloatArray, torque: FloatArray, dt: float, ph: DropPhysics
+) -> FloatArray:
+    """Karnopp stick-slip with implicit viscous drag, as the actuator physics integrates it."""
+    at_rest = w == 0.0
+    direction = np.where(at_rest, np.sign(torque), np.sign(w))
+    new = (w + (torque - ph.coulomb_nm * direction) / inertia * dt) / (
+        1.0 + ph.viscous_nms_per_rad * dt / inertia
+    )
+    new = np.where(~at_rest & (new * w < 0.0), 0.0, new)
+    return np.asarray(np.where(at_rest & (np.abs(torque) <= ph.static_nm), 0.0, new), dtype=float)
+
+
+def _rest_position(trial: DropTrial) -> float:
+    before = trial.q[trial.t_q < trial.start_s]
+    return float(np.median(before[-10:]))
+
+
+def _shuttle_state(trial: DropTrial) -> tuple[float, float]:
+    """Height and velocity at the impact piece's start, from a quadratic over the 15 ms before."""
+    sel = (trial.t_h >= trial.start_s - 0.015) & (trial.t_h < trial.start_s)
+    if np.count_nonzero(sel) < 5:
+        raise ModelError(f"{trial.name}: too few shuttle samples before contact")
+    coef = np.polyfit(trial.t_h[sel] - trial.start_s, trial.height[sel], 2)
+    return float(coef[2]), float(coef[1])
+
+
+# ----------------------------------------------------------------------------- effects
+
+
+@dataclass
+class DropEffect:
+    name: str
+    param_names: tuple[str, ...]
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    fittable: bool = True
+    discrete_choices: int = 0
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        return np.array([(lo + hi) / 2 for lo, hi in zip(self.lower, self.upper, strict=True)])
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        raise NotImplementedError
+
+    def meaningful(self, p: FloatArray) -> bool:
+        return True
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        return {}
+
+
+class DropDrift(DropEffect):
+    def __init__(self) -> None:
+        super().__init__(
+            "parameter_drift",
+            ("reflected_inertia_scale", "viscous_scale", "coulomb_scale"),
+            (0.2, 0.0, 0.0),
+            (5.0, 5.0, 5.0),
+        )
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        return np.ones(3)
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(
+            ph,
+            rotor_inertia_kgm2=ph.rotor_inertia_kgm2 * p[0],
+            viscous_nms_per_rad=ph.viscous_nms_per_rad * p[1],
+            coulomb_nm=ph.coulomb_nm * p[2],
+            static_nm=np.maximum(ph.static_nm, ph.coulomb_nm * p[2]),
+        )
+
+    def meaningful(self, p: FloatArray) -> bool:
+        return drifted(p)
+
+
+class DropTorqueOffset(DropEffect):
+    def __init__(self) -> None:
+        super().__init__("torque_offset", ("offset_nm",), (-2.0,), (2.0,))
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        return np.zeros(1)
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, torque_offset_nm=float(p[0]))
+
+
+class DropPayloadGravity(DropEffect):
+    """The shuttle's weight on the arm: m_s g r cos(theta) while they touch."""
+
+    def __init__(self) -> None:
+        super().__init__("payload_gravity", ("mgl_nm",), (0.0,), (5.0,))
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, weight_torque_nm=float(p[0]))
+
+
+class DropStiction(DropEffect):
+    def __init__(self) -> None:
+        super().__init__("stiction", ("static_nm",), (0.0,), (2.0,))
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, static_nm=np.maximum(ph.coulomb_nm, float(p[0])))
+
+
+class Restitution(DropEffect):
+    def __init__(self) -> None:
+        super().__init__("restitution", ("coefficient",), (0.0,), (0.95,))
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, restitution=float(p[0]))
+
+
+class ImpactSpeedLoss(DropEffect):
+    """Rail friction: the shuttle arrives slower than free fall."""
+
+    def __init__(self) -> None:
+        super().__init__("impact_speed_loss", ("rail_friction_n",), (0.0,), (5.0,))
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, rail_friction_n=float(p[0]))
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        # v^2 = 2 (g - F/m) h: the fraction of the free-fall speed lost at impact
+        return {
+            "speed_loss_fraction": float(1 - math.sqrt(max(0.0, 1 - p[0] / (self._m * GRAVITY))))
+        }
+
+    _m: float = 1.0
+
+
+class StructuralCompliance(DropEffect):
+    """The contact (arm, load cell, shuttle) is a spring: the collision takes time."""
+
+    def __init__(self) -> None:
+        super().__init__("structural_compliance", ("log10_stiffness_n_per_m",), (3.0,), (6.0,))
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, stiffness_n_per_m=float(10 ** p[0]))
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        return {"stiffness_n_per_m": float(10 ** p[0])}
+
+
+class Backlash(DropEffect):
+    def __init__(self) -> None:
+        super().__init__("backlash", ("backlash_rad",), (0.0,), (0.05,))
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, backlash_rad=float(p[0]))
+
+
+class DropSensorDelay(DropEffect):
+    def __init__(self) -> None:
+        super().__init__("sensor_delay", ("delay_s",), (0.0,), (0.02,))
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, delay_s=float(p[0]))
+
+
+class DropQuantization(DropEffect):
+    def __init__(self) -> None:
+        super().__init__("quantization", ("step_rad",), (1e-7,), (0.1,), fittable=False)
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        steps = np.concatenate([np.abs(np.diff(t.q)) for t in problem.fit_trials])
+        nonzero = steps[steps > 1e-12]
+        return np.array([float(np.min(nonzero)) if nonzero.size else 1e-6])
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, encoder_step_rad=float(p[0]))
+
+
+def drop_library() -> list[DropEffect]:
+    return [
+        DropDrift(),
+        DropTorqueOffset(),
+        DropPayloadGravity(),
+        DropStiction(),
+        Restitution(),
+        ImpactSpeedLoss(),
+        StructuralCompliance(),
+        Backlash(),
+        DropSensorDelay(),
+        DropQuantization(),
+    ]
+
+
+# ----------------------------------------------------------------------------- problem
+
+
+class _Set:
+    """The compared samples of some trials: fall heights and impact-piece samples."""
+
+    def __init__(self, trials: Sequence[DropTrial]) -> None:
+        self.trials = list(trials)
+        self.sim = DropSimulator(trials)
+        self.fall: list[tuple[FloatArray, FloatArray]] = []  # (t since release, height)
+        self.q: list[tuple[FloatArray, FloatArray]] = []  # (t since piece start, q)
+        self.h: list[tuple[FloatArray, FloatArray]] = []  # (t since piece start, height)
+        for t in trials:
+            fall = (t.t_h > t.release_s) & (t.t_h < t.start_s)
+            self.fall.append((t.t_h[fall][::10] - t.release_s, t.height[fall][::10]))
+            sel = (t.t_q >= t.start_s) & (t.t_q <= t.end_s)
+            self.q.append((t.t_q[sel] - t.start_s, t.q[sel]))
+            sel = (t.t_h >= t.start_s) & (t.t_h <= t.end_s)
+            self.h.append((t.t_h[sel][::10] - t.start_s, t.height[sel][::10]))
+
+    def error(self, ph: DropPhysics) -> FloatArray:
+        return self.error_many([ph])[0]
+
+    def error_many(self, physics: Sequence[DropPhysics]) -> list[FloatArray]:
+        """The error of each physics, all simulated in one run."""
+        n = len(self.trials)
+        ph = stack_physics(physics, n)
+        t_sim, q_sim, y_sim = self.sim.run(ph, len(physics))
+        out = []
+        for j in range(len(physics)):
+            parts = []
+            for i, trial in enumerate(self.trials):
+                row, r = j * n + i, trial.arm_m
+                # the fall: free fall from the hold, braked by the rail
+                t_f, h_f = self.fall[i]
+                a = GRAVITY - ph.rail_friction_n[row] / trial.mass_kg
+                parts.append((trial.held_height_m - 0.5 * a * t_f**2 - h_f) / r)
+                t_q, q = self.q[i]
+                q_model = np.interp(t_q - ph.delay_s[row], t_sim, q_sim[row])
+                step = ph.encoder_step_rad[row]
+                if step > 0:
+                    q_model = np.round(q_model / step) * step
+                parts.append(q_model - q)
+                t_h, h = self.h[i]
+                parts.append((np.interp(t_h, t_sim, y_sim[row]) - h) / r)
+            out.append(np.concatenate(parts))
+        return out
+
+    def layout(self) -> list[tuple[int, str, FloatArray]]:
+        """(trial, piece, absolute times) in the order :meth:`error` concatenates them."""
+        out = []
+        for i, trial in enumerate(self.trials):
+            out.append((i, "fall", self.fall[i][0] + trial.release_s))
+            out.append((i, "encoder", self.q[i][0] + trial.start_s))
+            out.append((i, "height", self.h[i][0] + trial.start_s))
+        return out
+
+
+class DropProblem:
+    """Drop-test trials of one actuator against eq. (2)."""
+
+    def __init__(
+        self,
+        trials: Sequence[DropTrial],
+        nominal: DropNominal,
+        candidates: Sequence[DropEffect] | None = None,
+    ) -> None:
+        from transparency_ros.analysis.discrepancy.discover import split_trials  # noqa: PLC0415
+
+        actuators = {t.actuator for t in trials}
+        if len(actuators) != 1:
+            raise ConfigError(f"one actuator per analysis, got {sorted(actuators)}")
+        if len(trials) < 2:
+            raise ConfigError("a drop-test analysis needs at least 2 trials (fit and held out)")
+        self.actuator = next(iter(actuators))
+        # held-out trials spread over the heights: split in the order of drop height
+        ordered = sorted(trials, key=lambda t: (t.held_height_m, t.name))
+        self.fit_trials, self.held_trials = split_trials(ordered)
+        self.fit = _Set(self.fit_trials)
+        self.held = _Set(self.held_trials)
+        self.model = nominal
+        # several effects act together in every drop (eq. (2) leaves out much): a kept effect
+        # must remove a fifth of the error above the noise floor, not half
+        self.min_improvement = 0.2
+        self._candidates = list(candidates) if candidates is not None else drop_library()
+        for c in self._candidates:
+            if isinstance(c, ImpactSpeedLoss):
+                c._m = float(np.mean([t.mass_kg for t in trials]))
+        self.nominal = {
+            k: v for k, v in nominal.as_dict().items() if k.startswith(f"{self.actuator}.")
+        }
+        self.split = {
+            "fit": [t.name for t in self.fit_trials],
+            "heldout": [t.name for t in self.held_trials],
+        }
+
+    def physics(
+        self, effects: Sequence[DropEffect], params: Sequence[FloatArray], n: int
+    ) -> DropPhysics:
+        a = self.actuator
+        ones = np.ones(n)
+        ph = DropPhysics(
+            rotor_inertia_kgm2=ones * self.model.reflected_inertia_kgm2[a],
+            viscous_nms_per_rad=ones * self.model.viscous_nms_per_rad[a],
+            coulomb_nm=ones * self.model.coulomb_nm[a],
+            static_nm=ones * self.model.coulomb_nm[a],
+        )
+        for effect, p in zip(effects, params, strict=True):
+            ph = effect.apply(ph, p, self)
+        return ph
+
+    def candidates(self) -> list[DropEffect]:
+        return list(self._candidates)
+
+    def initial(self, effect: DropEffect) -> FloatArray:
+        return effect.initial(self)
+
+    def error(
+        self, effects: Sequence[DropEffect], params: Sequence[FloatArray], held: bool
+    ) -> FloatArray:
+        s = self.held if held else self.fit
+        return s.error(self.physics(effects, params, len(s.trials)))
+
+    def error_many(
+        self,
+        effects: Sequence[DropEffect],
+        params: Sequence[FloatArray],
+        new: DropEffect,
+        xs: Sequence[FloatArray],
+        held: bool,
+    ) -> list[FloatArray]:
+        s = self.held if held else self.fit
+        n = len(s.trials)
+        return s.error_many([self.physics([*effects, new], [*params, x], n) for x in xs])
+
+    def phases(self) -> dict[str, BoolArray]:
+        masks: dict[str, list[BoolArray]] = {name: [] for name in PHASES}
+        for i, _piece, t in self.held.layout():
+            trial = self.held.trials[i]
+            for name, mask in _phase_masks(trial, t).items():
+                masks[name].append(mask)
+        return {name: np.concatenate(parts) for name, parts in masks.items()}
+
+    def segments(self) -> tuple[npt.NDArray[np.int64], list[tuple[str, float, float]]]:
+        index, labels = [], []
+        for i, piece, t in self.held.layout():
+            trial = self.held.trials[i]
+            if piece != "height":  # the impact piece's encoder and height share a segment
+                labels.append(
+                    (
+                        trial.name,
+                        *(
+                            (trial.release_s, trial.start_s)
+                            if piece == "fall"
+                            else (trial.start_s, trial.end_s)
+                        ),
+                    )
+                )
+            index.append(np.full(t.size, len(labels) - 1, dtype=np.int64))
+        return np.concatenate(index), labels
+
+    def noise_floor(self) -> float:
+        """RMS error sensor noise alone gives: encoder (quantization) and potentiometer noise,
+        weighted by how many samples of each are compared."""
+        q_noise = float(
+            np.sqrt(
+                np.mean(
+                    [position_noise(t.q[t.t_q < t.start_s][-50:]) ** 2 for t in self.fit_trials]
+                )
+            )
+        )
+        h_noise = float(
+            np.sqrt(
+                np.mean(
+                    [
+                        (position_noise(t.height[t.t_h < t.t_h[0] + 0.02]) / t.arm_m) ** 2
+                        for t in self.fit_trials
+                    ]
+                )
+            )
+        )
+        n_q = sum(q.size for _, q in self.fit.q)
+        n_h = sum(h.size for _, h in self.fit.h) + sum(h.size for _, h in self.fit.fall)
+        return float(math.sqrt((n_q * q_noise**2 + n_h * h_noise**2) / max(1, n_q + n_h)))
+
+    def residual_peak_hz(
+        self, effects: Sequence[DropEffect], params: Sequence[FloatArray]
+    ) -> float:
+        """Where the held-out encoder residual after contact has most power (uniformly
+        resampled at 1 kHz)."""
+        ph = self.physics(effects, params, len(self.held_trials))
+        t_sim, q_sim, _ = self.held.sim.run(ph)
+        best_f, best_p = math.nan, -1.0
+        for i in range(len(self.held_trials)):
+            t_q, q = self.held.q[i]
+            grid = np.arange(LEAD_S, t_q[-1], 1e-3)
+            res = np.interp(grid, t_q, q) - np.interp(grid - ph.delay_s, t_sim, q_sim[i])
+            f, power = spectrum_peak(res, 1000.0, above_hz=2.0)
+            if power > best_p:
+                best_f, best_p = f, power
+        return best_f
+
+    def trace(
+        self, effects: Sequence[DropEffect], params: Sequence[FloatArray], segment: int
+    ) -> Trace:
+        _, labels = self.segments()
+        name = labels[segment][0]
+        i = next(k for k, t in enumerate(self.held_trials) if t.name == name)
+        trial = self.held_trials[i]
+        t_sim, q_nom, _ = self.held.sim.run(self.physics([], [], len(self.held_trials)))
+        ph = self.physics(effects, params, len(self.held_trials))
+        _, q_fin, _ = self.held.sim.run(ph)
+        t_q, q = self.held.q[i]
+        return Trace(
+            f"{trial.name} (drop {trial.held_height_m:.2f} m), time from 3 ms before contact",
+            t_q,
+            q,
+            np.interp(t_q, t_sim, q_nom[i]),
+            np.interp(t_q - ph.delay_s, t_sim, q_fin[i]),
+            "encoder position [rad]",
+        )
+
+
+def _phase_masks(trial: DropTrial, t: FloatArray) -> dict[str, BoolArray]:
+    """Phase of each time ``t`` of a trial, from its recorded data: before contact; the first
+    impact (load cell above threshold); then by the arm's recorded motion: away from rest
+    (deflection), back towards it (rebound), within 3 ms of a turn (reversal), or stuck."""
+    from scipy.signal import savgol_filter  # noqa: PLC0415
+
+    rest = _rest_position(trial)
+    dt = float(np.median(np.diff(trial.t_q)))
+    n = max(5, round(0.01 / dt) | 1)
+    speed = (
+        savgol_filter(trial.q, n, 2, deriv=1, delta=dt)
+        if trial.q.size > n
+        else np.gradient(trial.q, trial.t_q)
+    )
+    w = np.interp(t, trial.t_q, speed)
+    q = np.interp(t, trial.t_q, trial.q)
+    before = t < trial.contact_s
+    impact = ~before & (t < trial.contact_end_s)
+    after = ~before & ~impact
+    turns = trial.t_q[1:][np.sign(speed[1:]) != np.sign(speed[:-1])]
+    near_turn = np.zeros(t.size, dtype=bool)
+    if turns.size:
+        j = np.clip(np.searchsorted(turns, t), 1, turns.size) - 1
+        near = np.minimum(
+            np.abs(t - turns[j]), np.abs(t - turns[np.minimum(j + 1, turns.size - 1)])
+        )
+        near_turn = near < 0.003
+    stuck = after & (np.abs(w) < 0.02)
+    moving = after & ~stuck
+    away = np.sign(w) == np.sign(q - rest)
+    return {
+        "before_contact": before,
+        "impact": impact,
+        "deflection": moving & ~near_turn & away,
+        "rebound": moving & ~near_turn & ~away,
+        "reversal": moving & near_turn,
+        "stuck": stuck,
+    }
