@@ -142,13 +142,14 @@ def test_import_csv_then_discrepancy_json_and_report(tmp_path: Path) -> None:
     assert "torque_offset" in (tmp_path / "report" / "improvement.md").read_text()
 
 
-def test_a_drop_test_campaign_is_refused_clearly(tmp_path: Path) -> None:
+def test_drop_tests_of_several_actuators_are_refused_clearly(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from transparency_ros.cli import main  # noqa: PLC0415
 
-    bags = Path(__file__).resolve().parents[2] / "bags" / "U10DD"
-    spec = tmp_path / "n.yaml"
-    spec.write_text("inertia_kgm2: 0.001\n")
-    assert main(["discrepancy", str(bags), "--nominal", str(spec)]) == 2
+    bags = Path(__file__).resolve().parents[2] / "bags"
+    assert main(["discrepancy", str(bags / "U10DD"), str(bags / "EC60")]) == 2
+    assert "one actuator per analysis" in capsys.readouterr().err
 
 
 def test_effects_that_explain_alike_are_alternatives_and_the_simpler_is_named(

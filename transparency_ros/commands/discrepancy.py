@@ -165,8 +165,8 @@ def _problem(args: argparse.Namespace) -> Any:
             load_drop_trial,
         )
 
-        trials = [load_drop_trial(b) for b in bags]
-        return DropProblem(trials, load_drop_nominal(args.nominal, trials))
+        drops = [load_drop_trial(b) for b in bags]
+        return DropProblem(drops, load_drop_nominal(args.nominal, drops))
     if kind != TRIAL_KIND:
         raise ConfigError(
             f"{kinds[kind][0]}: transparency.trial = {kind!r}; the tool reads "

@@ -223,7 +223,10 @@ class TorqueDrivenProblem:
         return [self.error([*effects, new], [*params, x], held) for x in xs]
 
     def phases(self) -> dict[str, npt.NDArray[np.bool_]]:
-        return {name: mask.ravel() for name, mask in window_phases(self.w_held).items()}
+        return {
+            name: np.asarray(mask, dtype=bool).ravel()
+            for name, mask in window_phases(self.w_held).items()
+        }
 
     def segments(self) -> tuple[npt.NDArray[np.int64], list[tuple[str, float, float]]]:
         w = self.w_held

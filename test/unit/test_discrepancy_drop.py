@@ -1,0 +1,72 @@
+"""The discrepancy tool on drop tests: eq. (2) as the nominal model, on generated campaigns whose
+hidden physics is known (labels read only here, after the tool has run)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from transparency_ros.analysis.discrepancy.discover import Discoverer
+from transparency_ros.analysis.discrepancy.drop import (
+    DropProblem,
+    load_drop_nominal,
+    load_drop_trial,
+)
+from transparency_ros.bag.reader import find_bags
+from transparency_ros.synth.drop_campaign import write_drop_campaign
+
+
+def _problem(out: Path) -> DropProblem:
+    trials = [load_drop_trial(b) for b in find_bags([str(out / "bags")])]
+    return DropProblem(trials, load_drop_nominal(None, trials))
+
+
+def test_with_nothing_hidden_eq2_fits_to_the_noise_and_nothing_is_named(tmp_path: Path) -> None:
+    out = write_drop_campaign(tmp_path / "c", 1, hidden=[], actuator="T2822")
+    problem = _problem(out)
+    err = problem.error([], [], True)
+    phases = problem.phases()
+    floor = problem.noise_floor()
+    # the fall (release time from the parabola's vertex) is predicted to the sensor noise
+    fall = float(np.sqrt(np.mean(err[phases["before_contact"]] ** 2)))
+    assert fall < 1.5 * floor
+    # after the impact the integration of eq. (2) differs from the generator's by little
+    assert float(np.sqrt(np.mean(err**2))) < 5 * floor
+    report = Discoverer(problem).run()
+    assert report.findings == []
+
+
+def test_the_shuttles_weight_on_the_arm_is_found_and_measured(tmp_path: Path) -> None:
+    out = write_drop_campaign(tmp_path / "c", 2, hidden=["payload_gravity"], actuator="EC60")
+    report = Discoverer(_problem(out)).run()
+    truth = json.loads((out / "labels.json").read_text())["hidden"]["payload_gravity"]
+    first = report.findings[0]
+    assert first.effect == "payload_gravity"
+    assert first.parameters["mgl_nm"] == pytest.approx(truth["mgl_nm"], rel=0.05)
+    assert first.heldout_rmse_after < 0.1 * first.heldout_rmse_before
+    assert first.where["phase"] in {"deflection", "rebound", "stuck", "reversal"}
+
+
+def test_gearbox_backlash_is_found_with_its_width(tmp_path: Path) -> None:
+    out = write_drop_campaign(tmp_path / "c", 4, hidden=["backlash"], actuator="U10GB")
+    report = Discoverer(_problem(out)).run()
+    truth = json.loads((out / "labels.json").read_text())["hidden"]["backlash"]
+    first = report.findings[0]
+    assert first.effect == "backlash"
+    assert first.parameters["backlash_rad"] == pytest.approx(truth["backlash_rad"], rel=0.2)
+
+
+def test_a_drop_bag_loads_and_a_missing_one_is_named(tmp_path: Path) -> None:
+    from transparency_ros.bag.errors import BagReadError  # noqa: PLC0415
+
+    out = write_drop_campaign(
+        tmp_path / "c", 9, hidden=["impact_speed_loss"], actuator="U10DD", heights=[0.05]
+    )
+    (bag,) = find_bags([str(out / "bags")])
+    trial = load_drop_trial(bag)  # a light arm's short impact still shows on the load cell
+    assert trial.release_s < trial.contact_s < trial.contact_end_s
+    with pytest.raises(BagReadError, match="missing"):
+        load_drop_trial(tmp_path / "missing")

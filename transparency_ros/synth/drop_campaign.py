@@ -1,0 +1,299 @@
+"""Generate drop-test campaigns (Sec. 3.1) with hidden effects, as bags of the bag contract.
+
+The truth is integrated here with the project's actuator physics
+(:class:`~transparency_ros.core.actuator_physics.ActuatorPhysics`: backlash, stick-slip friction,
+encoder resolution, friction ripple) and a shuttle environment written for this generator: a
+stiff spring-damper contact (5e6 N/m unless ``structural_compliance`` softens it), damped so that
+it rebounds with the hidden ``restitution`` (none by default: the shuttle stays on the arm once
+the impact is over), rail friction, and the shuttle's weight on the arm only when
+``payload_gravity`` is hidden. With nothing hidden, this is eq. (2) of the paper to within the
+stiffness of the contact. Sensors as on the rig: encoder at 1 kHz (with ``sensor_delay``,
+``quantization``), load cell and potentiometer at 10 kHz with noise. Labels go to a separate
+file the tool never reads.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from transparency_ros.core.actuator_physics import ActuatorPhysics, ImpedanceLaw, PhysicsParams
+from transparency_ros.core.config import get_actuator, load_drop_test
+
+GRAVITY = 9.81
+EFFECTS = (
+    "payload_gravity",
+    "restitution",
+    "impact_speed_loss",
+    "structural_compliance",
+    "backlash",
+    "stiction",
+    "sensor_delay",
+    "quantization",
+    "torque_offset",
+    "parameter_drift",
+)
+OUTSIDE = "friction_ripple"  # not in the tool's library: must come out unexplained
+ACTUATORS = ("U10DD", "EC60", "T2822", "U10GB")
+RIGID_N_PER_M = 5e6
+HEIGHTS_M = (0.05, 0.1, 0.2, 0.35, 0.5, 0.8)
+BASE_STAMP_S = 1.7e9
+
+_SAMPLERS: dict[str, Any] = {
+    "payload_gravity": lambda r, m, arm: {"mgl_nm": m * GRAVITY * arm},
+    "restitution": lambda r, m, arm: {"coefficient": r.uniform(0.3, 0.6)},
+    "impact_speed_loss": lambda r, m, arm: {"rail_friction_n": r.uniform(0.4, 1.2)},
+    "structural_compliance": lambda r, m, arm: {"stiffness_n_per_m": r.uniform(2e4, 1e5)},
+    "backlash": lambda r, m, arm: {"backlash_rad": math.radians(r.uniform(0.8, 2.0))},
+    "stiction": lambda r, m, arm: {"static_nm": r.uniform(0.3, 0.5)},
+    "sensor_delay": lambda r, m, arm: {"delay_s": r.uniform(0.003, 0.008)},
+    "quantization": lambda r, m, arm: {"step_rad": 2 * math.pi / r.choice([512, 1024])},
+    "torque_offset": lambda r, m, arm: {"offset_nm": r.choice([-1, 1]) * r.uniform(0.08, 0.15)},
+    "parameter_drift": lambda r, m, arm: {"viscous_scale": r.uniform(1.8, 2.5)},
+    OUTSIDE: lambda r, m, arm: {"ripple": r.uniform(0.6, 0.8), "cycles_per_rev": 40.0},
+}
+
+
+@dataclass
+class Shuttle:
+    """The shuttle on its rail against the arm tip, as an environment of the actuator physics."""
+
+    mass_kg: float
+    arm_m: float
+    arm_inertia_kgm2: float
+    height_m: float
+    stiffness_n_per_m: float
+    restitution: float
+    weight_on_arm: bool
+    rail_friction_n: float
+    may_stay: bool  # the shuttle comes to rest on the arm once the impact is over
+    velocity_m_s: float = 0.0
+    force_n: float = 0.0
+    impulse_ns: float = 0.0  # integral of the contact force: the load cell averages over a sample
+    released: bool = False
+    on_arm: bool = False
+    _last_s: float | None = None
+
+    @property
+    def damping_ns_per_m(self) -> float:
+        e = min(max(self.restitution, 1e-3), 0.999)
+        zeta = -math.log(e) / math.sqrt(math.pi**2 + math.log(e) ** 2)
+        return 2 * zeta * math.sqrt(self.stiffness_n_per_m * self.mass_kg)
+
+    @property
+    def inertia_kgm2(self) -> float:
+        return self.arm_inertia_kgm2 + (self.mass_kg * self.arm_m**2 if self.on_arm else 0.0)
+
+    def torque_nm(self, position_rad: float, velocity_rad_s: float, time_s: float) -> float:
+        dt = 0.0 if self._last_s is None else time_s - self._last_s
+        self._last_s = time_s
+        r, m = self.arm_m, self.mass_kg
+        cos = math.cos(position_rad)
+        tip_y, tip_v = r * math.sin(position_rad), r * cos * velocity_rad_s
+        weight = m * GRAVITY if self.weight_on_arm else 0.0
+        if self.on_arm:  # rides on the tip
+            self.height_m, self.velocity_m_s = tip_y, tip_v
+            rail = self.rail_friction_n * (1.0 if tip_v > 0 else -1.0 if tip_v < 0 else 0.0)
+            self.force_n = weight
+            self.impulse_ns += weight * dt
+            return -(weight + rail) * r * cos
+        if not self.released:
+            return 0.0
+        pen = tip_y - self.height_m
+        rel = tip_v - self.velocity_m_s
+        force = 0.0
+        if pen > 0:
+            force = max(0.0, self.stiffness_n_per_m * pen + self.damping_ns_per_m * rel)
+            if self.may_stay and abs(rel) < 0.02 and force > 0:
+                self.on_arm = True  # the impact is over: from now on they move as one
+        self.force_n = force
+        self.impulse_ns += force * dt
+        acc = (force - (weight if pen > 0 else m * GRAVITY)) / m
+        if self.velocity_m_s != 0.0:
+            acc -= math.copysign(self.rail_friction_n / m, self.velocity_m_s)
+        self.velocity_m_s += acc * dt
+        self.height_m += self.velocity_m_s * dt
+        return -force * r * cos
+
+
+def draw_effect(name: str, rng: random.Random, mass_kg: float, arm_m: float) -> dict[str, float]:
+    return dict(_SAMPLERS[name](rng, mass_kg, arm_m))
+
+
+def simulate_drop(
+    actuator: str,
+    height_m: float,
+    hidden: dict[str, dict[str, float]],
+    seed: int,
+    *,
+    hold_s: float = 0.05,
+    after_s: float = 0.3,
+) -> dict[str, np.ndarray]:
+    """One trial: encoder (t, q) at 1 kHz and DAQ (t, height, force) at 10 kHz."""
+    a = get_actuator(actuator)
+    drop = load_drop_test()
+    m, r = drop.shuttle_mass_for(actuator), drop.arm_length_m
+    drift = hidden.get("parameter_drift", {}).get("viscous_scale", 1.0)
+    quant = hidden.get("quantization", {}).get("step_rad")
+    counts = round(2 * math.pi / quant / float(a.reduction_ratio)) if quant else 2**22
+    params = PhysicsParams(
+        rotor_inertia_kgm2=a.reflected_inertia_kgm2,
+        static_friction_nm=max(
+            a.coulomb_friction_nm, hidden.get("stiction", {}).get("static_nm", 0)
+        ),
+        coulomb_friction_nm=a.coulomb_friction_nm,
+        viscous_nms_per_rad=a.viscous_damping_nms_per_rad * drift,
+        backlash_rad=hidden.get("backlash", {}).get("backlash_rad", 0.0),
+        torque_limit_nm=a.peak_torque_nm,
+        encoder_counts_per_rev=counts,
+        reduction=float(a.reduction_ratio),
+        friction_ripple=hidden.get(OUTSIDE, {}).get("ripple", 0.0),
+        friction_ripple_cycles_per_rev=hidden.get(OUTSIDE, {}).get("cycles_per_rev", 1.0),
+    )
+    compliant = "structural_compliance" in hidden
+    shuttle = Shuttle(
+        mass_kg=m,
+        arm_m=r,
+        arm_inertia_kgm2=drop.arm_inertia_kgm2,
+        height_m=height_m,
+        stiffness_n_per_m=hidden.get("structural_compliance", {}).get(
+            "stiffness_n_per_m", RIGID_N_PER_M
+        ),
+        restitution=hidden.get("restitution", {}).get("coefficient", 0.0),
+        weight_on_arm="payload_gravity" in hidden,
+        rail_friction_n=hidden.get("impact_speed_loss", {}).get("rail_friction_n", 0.0),
+        may_stay=not compliant,
+    )
+    physics = ActuatorPhysics(params, shuttle, max_step_s=2e-5)
+    law = ImpedanceLaw(
+        drop.k_s_nm_per_rad, 0.0, 0.0, 0.0, hidden.get("torque_offset", {}).get("offset_nm", 0.0)
+    )
+    rng = np.random.default_rng(seed)
+    fall_s = math.sqrt(2 * height_m / GRAVITY) * 1.1
+    total = hold_s + fall_s + after_s
+    n = round(total * 10_000)
+    t_daq = np.arange(n) / 10_000
+    q_true, h, f = np.empty(n), np.empty(n), np.empty(n)
+    impulse = 0.0
+    for k in range(n):
+        if k == round(hold_s * 10_000):
+            shuttle.released = True
+        # the load cell's anti-alias filter: the mean force over the last sample period (a
+        # light arm's impact lasts less than one period)
+        q_true[k], h[k] = physics.measured_position_rad, shuttle.height_m
+        f[k] = (shuttle.impulse_ns - impulse) / 1e-4
+        impulse = shuttle.impulse_ns
+        physics.advance(1e-4, law)
+    delay = hidden.get("sensor_delay", {}).get("delay_s", 0.0)
+    t_q = t_daq[::10]
+    q = np.interp(t_q - delay, t_daq, q_true, left=0.0)
+    return {
+        "t_q": t_q,
+        "q": q,
+        "t_daq": t_daq,
+        "height": h + rng.normal(0, 2e-5, n),
+        "force": f + rng.normal(0, 0.05, n),
+    }
+
+
+def write_drop_campaign(
+    out: Path,
+    seed: int,
+    *,
+    hidden: Sequence[str] | None = None,
+    actuator: str | None = None,
+    heights: Sequence[float] = HEIGHTS_M,
+) -> Path:
+    """One bag per height under ``out/bags``; labels in ``out/labels.json``."""
+    from transparency_ros.bag.writer import BagWriter, message_types, time_msg  # noqa: PLC0415
+
+    rng = random.Random(seed)
+    actuator = actuator or rng.choice(ACTUATORS)
+    if hidden is None:
+        kind = rng.choice(["single", "single", "single", "pair", "none", "outside"])
+        if kind == "single":
+            hidden = [rng.choice(EFFECTS)]
+        elif kind == "pair":
+            hidden = rng.sample(list(EFFECTS), 2)
+        else:
+            hidden = [] if kind == "none" else [OUTSIDE]
+    drop = load_drop_test()
+    m, r = drop.shuttle_mass_for(actuator), drop.arm_length_m
+    truth = {name: draw_effect(name, rng, m, r) for name in hidden}
+    types = message_types()
+    custom = {
+        "transparency.trial": "drop_test",
+        "transparency.actuator": actuator,
+        "transparency.k_s": str(drop.k_s_nm_per_rad),
+        "transparency.k_d": "0.0",
+        "transparency.threshold_rad": str(drop.threshold_rad),
+        "transparency.shuttle_mass_kg": str(m),
+        "transparency.arm_length_m": str(r),
+        "transparency.arm_inertia_kgm2": str(drop.arm_inertia_kgm2),
+    }
+    for i, height in enumerate(heights):
+        data = simulate_drop(actuator, height, truth, seed * 100 + i)
+        bag = out / "bags" / actuator / f"h{height * 1000:06.1f}mm"
+        header = types["std_msgs/msg/Header"]
+        with BagWriter(bag, custom | {"transparency.drop_height_m": str(height)}) as w:
+            w.add("/joint_states", "sensor_msgs/msg/JointState")
+            w.add("/joint_commands", "sensor_msgs/msg/JointState")
+            w.add("/load_cell", "geometry_msgs/msg/WrenchStamped")
+            w.add("/shuttle/height", "geometry_msgs/msg/PointStamped")
+            ns0 = round(BASE_STAMP_S * 1e9)
+            w.write_message(
+                "/joint_commands",
+                ns0,
+                types["sensor_msgs/msg/JointState"](
+                    header=header(stamp=time_msg(ns0), frame_id=""),
+                    name=["joint"],
+                    position=np.zeros(1),
+                    velocity=np.zeros(1),
+                    effort=np.zeros(1),
+                ),
+            )
+            for t, q in zip(data["t_q"], data["q"], strict=True):
+                ns = ns0 + round(t * 1e9)
+                w.write_message(
+                    "/joint_states",
+                    ns,
+                    types["sensor_msgs/msg/JointState"](
+                        header=header(stamp=time_msg(ns), frame_id=""),
+                        name=["joint"],
+                        position=np.array([q]),
+                        velocity=np.zeros(1),
+                        effort=np.array([-drop.k_s_nm_per_rad * q]),
+                    ),
+                )
+            vec, wrench = types["geometry_msgs/msg/Vector3"], types["geometry_msgs/msg/Wrench"]
+            point = types["geometry_msgs/msg/Point"]
+            for t, h, f in zip(data["t_daq"], data["height"], data["force"], strict=True):
+                ns = ns0 + round(t * 1e9)
+                stamp = header(stamp=time_msg(ns), frame_id="")
+                w.write_message(
+                    "/load_cell",
+                    ns,
+                    types["geometry_msgs/msg/WrenchStamped"](
+                        header=stamp,
+                        wrench=wrench(
+                            force=vec(x=0.0, y=0.0, z=f), torque=vec(x=0.0, y=0.0, z=0.0)
+                        ),
+                    ),
+                )
+                w.write_message(
+                    "/shuttle/height",
+                    ns,
+                    types["geometry_msgs/msg/PointStamped"](
+                        header=stamp, point=point(x=0.0, y=0.0, z=h)
+                    ),
+                )
+    labels = out / "labels.json"  # never read by the tool
+    labels.write_text(json.dumps({"seed": seed, "actuator": actuator, "hidden": truth}, indent=2))
+    return out
