@@ -40,19 +40,22 @@ def register(subparsers: Any) -> None:
         "discrepancy",
         help="locate where a model and recordings differ, name and model the missing physics",
         description=(
-            "For 1-DoF torque-driven recordings (bags with /joint_states: position, velocity, "
-            "effort = torque): simulate the nominal model in 0.1 s windows, fit candidate "
-            "effects on some trials, keep those that improve the held-out trials, report where "
-            "they act, and what is left unexplained. Drop-test campaigns are not supported yet."
+            "Simulate the nominal model for every trial, fit candidate effects on some trials, "
+            "keep those that improve the held-out trials, report where they act and what is "
+            "left unexplained. 1-DoF torque-driven recordings (bags with /joint_states: "
+            "position, velocity, effort = torque) are simulated in windows; drop-test bags "
+            "(transparency.trial = drop_test, one actuator per run) against eq. (2) with "
+            "Table 1."
         ),
     )
     d.add_argument("bags", nargs="+", metavar="BAG_OR_DIR")
     d.add_argument(
         "--nominal",
-        required=True,
         metavar="SPEC.yaml",
-        help="nominal model terms (inertia_kgm2, viscous_nms_per_rad, coulomb_nm, "
-        "gravity_nm, gravity_offset_rad) or a DFKI pendulum parameter file",
+        help="torque-driven (required): nominal terms (inertia_kgm2, viscous_nms_per_rad, "
+        "coulomb_nm, gravity_nm, gravity_offset_rad) or a DFKI pendulum parameter file; "
+        "drop tests (optional): overrides of reflected_inertia_kgm2, viscous_nms_per_rad, "
+        "coulomb_nm",
     )
     d.add_argument("--window", type=float, default=0.1, metavar="S", help="window length [s]")
     d.add_argument("--json", action="store_true")
