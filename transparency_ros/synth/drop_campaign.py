@@ -2,14 +2,14 @@
 
 The truth is integrated here with the project's actuator physics
 (:class:`~transparency_ros.core.actuator_physics.ActuatorPhysics`: backlash, stick-slip friction,
-encoder resolution, friction ripple) and a shuttle environment written for this generator: a
-stiff spring-damper contact (5e6 N/m unless ``structural_compliance`` softens it), damped so that
-it rebounds with the hidden ``restitution`` (none by default: the shuttle stays on the arm once
-the impact is over), rail friction, and the shuttle's weight on the arm only when
-``payload_gravity`` is hidden. With nothing hidden, this is eq. (2) of the paper to within the
-stiffness of the contact. Sensors as on the rig: encoder at 1 kHz (with ``sensor_delay``,
-``quantization``), load cell and potentiometer at 10 kHz with noise. Labels go to a separate
-file the tool never reads.
+encoder resolution, friction ripple, 20 us substeps) and a shuttle written for this generator:
+collisions are instant (Newton's law with the hidden ``restitution``; none by default: the
+shuttle stays on the arm) unless ``structural_compliance`` makes the contact a spring-damper
+(damped for the restitution); rail friction; the shuttle's weight on the arm only when
+``payload_gravity`` is hidden. With nothing hidden this is eq. (2) of the paper. Sensors as on
+the rig: encoder at 1 kHz (with ``sensor_delay``, ``quantization``), load cell (the mean force
+over each sample period) and potentiometer at 10 kHz with noise. Labels go to a separate file
+the tool never reads.
 """
 
 from __future__ import annotations
@@ -42,7 +42,6 @@ EFFECTS = (
 )
 OUTSIDE = "friction_ripple"  # not in the tool's library: must come out unexplained
 ACTUATORS = ("U10DD", "EC60", "T2822", "U10GB")
-RIGID_N_PER_M = 5e6
 HEIGHTS_M = (0.05, 0.1, 0.2, 0.35, 0.5, 0.8)
 BASE_STAMP_S = 1.7e9
 
@@ -73,7 +72,7 @@ class Shuttle:
     restitution: float
     weight_on_arm: bool
     rail_friction_n: float
-    may_stay: bool  # the shuttle comes to rest on the arm once the impact is over
+    compliant: bool  # a spring contact; otherwise collisions are instant (see strike())
     velocity_m_s: float = 0.0
     force_n: float = 0.0
     impulse_ns: float = 0.0  # integral of the contact force: the load cell averages over a sample
@@ -106,13 +105,11 @@ class Shuttle:
             return -(weight + rail) * r * cos
         if not self.released:
             return 0.0
-        pen = tip_y - self.height_m
+        pen = tip_y - self.height_m if self.compliant else 0.0
         rel = tip_v - self.velocity_m_s
         force = 0.0
         if pen > 0:
             force = max(0.0, self.stiffness_n_per_m * pen + self.damping_ns_per_m * rel)
-            if self.may_stay and abs(rel) < 0.02 and force > 0:
-                self.on_arm = True  # the impact is over: from now on they move as one
         self.force_n = force
         self.impulse_ns += force * dt
         acc = (force - (weight if pen > 0 else m * GRAVITY)) / m
@@ -121,6 +118,34 @@ class Shuttle:
         self.velocity_m_s += acc * dt
         self.height_m += self.velocity_m_s * dt
         return -force * r * cos
+
+    def strike(self, physics: ActuatorPhysics) -> None:
+        """An instant collision (Newton's law with the restitution) when the falling shuttle
+        meets the tip: momentum exchanged with the body the tip belongs to (the arm, and the
+        motor when the gearbox is engaged). A rebound slower than 5 cm/s ends the bouncing:
+        the shuttle stays on the arm."""
+        s = physics.state
+        if self.compliant or self.on_arm or not self.released:
+            return
+        r, m = self.arm_m, self.mass_kg
+        cos = math.cos(s.load_position_rad)
+        tip_y, tip_v = r * math.sin(s.load_position_rad), r * cos * s.load_velocity_rad_s
+        u = self.velocity_m_s - tip_v
+        if self.height_m > tip_y or u >= 0:
+            return
+        engaged = s.engaged_side != 0
+        inertia = self.arm_inertia_kgm2 + (physics.params.rotor_inertia_kgm2 if engaged else 0.0)
+        big_m = inertia / (r * cos) ** 2
+        e = self.restitution if abs(u) * self.restitution >= 0.05 else 0.0
+        v_new = self.velocity_m_s - (1 + e) * big_m / (m + big_m) * u
+        w_new = (tip_v + (1 + e) * m / (m + big_m) * u) / (r * cos)
+        self.impulse_ns += m * abs(v_new - self.velocity_m_s)
+        self.velocity_m_s, self.height_m = v_new, tip_y
+        s.load_velocity_rad_s = w_new
+        if engaged:
+            s.motor_velocity_rad_s = w_new
+        if e == 0.0:
+            self.on_arm = True
 
 
 def draw_effect(name: str, rng: random.Random, mass_kg: float, arm_m: float) -> dict[str, float]:
@@ -163,13 +188,11 @@ def simulate_drop(
         arm_m=r,
         arm_inertia_kgm2=drop.arm_inertia_kgm2,
         height_m=height_m,
-        stiffness_n_per_m=hidden.get("structural_compliance", {}).get(
-            "stiffness_n_per_m", RIGID_N_PER_M
-        ),
+        stiffness_n_per_m=hidden.get("structural_compliance", {}).get("stiffness_n_per_m", 0.0),
         restitution=hidden.get("restitution", {}).get("coefficient", 0.0),
         weight_on_arm="payload_gravity" in hidden,
         rail_friction_n=hidden.get("impact_speed_loss", {}).get("rail_friction_n", 0.0),
-        may_stay=not compliant,
+        compliant=compliant,
     )
     physics = ActuatorPhysics(params, shuttle, max_step_s=2e-5)
     law = ImpedanceLaw(
@@ -190,7 +213,9 @@ def simulate_drop(
         q_true[k], h[k] = physics.measured_position_rad, shuttle.height_m
         f[k] = (shuttle.impulse_ns - impulse) / 1e-4
         impulse = shuttle.impulse_ns
-        physics.advance(1e-4, law)
+        for _ in range(5):
+            physics.advance(2e-5, law)
+            shuttle.strike(physics)
     delay = hidden.get("sensor_delay", {}).get("delay_s", 0.0)
     t_q = t_daq[::10]
     q = np.interp(t_q - delay, t_daq, q_true, left=0.0)

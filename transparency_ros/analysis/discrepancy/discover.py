@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -454,16 +454,78 @@ class Discoverer:
                 alternatives=alternatives,
             )
             report.findings.append(finding)
-            report.fitted.append((cand, x))
             self.progress(f"found {cand.name}: {finding.evidence}")
             effects.append(cand)
             params.append(x)
             held_err = err
             remaining = [c for c in remaining if c is not cand]
+            # the effects found so far, refitted together: an effect found first may have
+            # stood in for part of one found later
+            refit, joint = self._refit(effects, params)
+            if joint is not None:
+                refit_err = problem.error(effects, refit, True)
+                if self._rmse(refit_err) < self._rmse(held_err):
+                    params, held_err = refit, refit_err
+                    intervals = self._interval(joint, joint.x)
+                    self._update_findings(report, effects, params, intervals)
+        report.fitted = list(zip(effects, params, strict=True))
         report.final_heldout_rmse = self._rmse(held_err)
         report.unexplained = self._leftover(held_err, effects, params)
         report.seconds = time.perf_counter() - started
         return report
+
+    def _refit(
+        self, effects: Sequence[Any], params: Sequence[FloatArray]
+    ) -> tuple[list[FloatArray], Any]:
+        """All fittable parameters of ``effects`` fitted together on the fitting trials, from
+        their current values; (params, least-squares result) or (params, None) when there is
+        nothing to refit or the joint fit is no better."""
+        index = [i for i, e in enumerate(effects) if e.fittable]
+        if len(index) < 2:
+            return list(params), None
+        sizes = [params[i].size for i in index]
+        lower = np.concatenate([np.asarray(effects[i].lower, dtype=float) for i in index])
+        upper = np.concatenate([np.asarray(effects[i].upper, dtype=float) for i in index])
+        x0 = np.clip(np.concatenate([params[i] for i in index]), lower, upper)
+
+        def unpack(x: FloatArray) -> list[FloatArray]:
+            out, k = list(params), 0
+            for i, n in zip(index, sizes, strict=True):
+                out[i] = np.array(x[k : k + n])
+                k += n
+            return out
+
+        def residual(x: FloatArray) -> FloatArray:
+            return self.problem.error(effects, unpack(x), False)
+
+        result = least_squares(
+            residual, x0, bounds=(lower, upper), x_scale="jac", max_nfev=40, diff_step=1e-3
+        )
+        if float(np.sum(result.fun**2)) >= float(np.sum(residual(x0) ** 2)):
+            return list(params), None
+        return unpack(result.x), result
+
+    @staticmethod
+    def _update_findings(
+        report: Report,
+        effects: Sequence[Any],
+        params: Sequence[FloatArray],
+        intervals: Sequence[tuple[float, float]],
+    ) -> None:
+        """Parameters and intervals of the findings from a joint refit (intervals in the order
+        of the fittable effects' parameters)."""
+        k = 0
+        for i, (effect, p) in enumerate(zip(effects, params, strict=True)):
+            ci = report.findings[i].confidence_interval
+            if effect.fittable:
+                ci = dict(zip(effect.param_names, intervals[k : k + p.size], strict=True))
+                k += p.size
+            report.findings[i] = replace(
+                report.findings[i],
+                parameters={n: float(v) for n, v in zip(effect.param_names, p, strict=True)}
+                | effect.extra_parameters(p),
+                confidence_interval=ci,
+            )
 
     def _leftover(
         self, err: FloatArray, effects: Sequence[Any] = (), params: Sequence[FloatArray] = ()

@@ -384,23 +384,35 @@ class DropSimulator:
                 v_new = v - (1 + e) * big_m / (m + big_m) * u
                 tip_new = tip_v + (1 + e) * m / (m + big_m) * u
                 w_new = tip_new / (r * np.cos(ql))
-                # the collision happened tau before the end of this step: from then on the
-                # bodies moved with their new velocities (first-order event location)
+                # the collision happened tau before the end of this step: go back to it and
+                # integrate the rest of the step from the new velocities (the drag of a geared
+                # actuator changes the speed by percents within a step)
                 tau = np.clip((tip_y - y) / np.maximum(tip_v - v, 1e-9), 0.0, dt)
-                dq = (w_new - wl) * tau
-                y = np.where(strike, tip_y + (v_new - tip_v) * tau, y)
-                v = np.where(strike, v_new, v)
-                ql = np.where(strike, ql + dq, ql)
-                qm = np.where(strike & engaged, qm + dq, qm)
-                wl = np.where(strike, w_new, wl)
-                wm = np.where(strike & engaged, w_new, wm)
-                glued = glued | (strike & stays)
+                now_glued = glued | (strike & stays)
+                ql_c = ql - wl * tau
+                qm_c = qm - wm * tau
+                j_after = j_a + np.where(now_glued, m * r * r, 0.0)
+                load_after = np.where(now_glued, -weight * np.cos(ql_c), 0.0)
+                drive_c = k_s * (theta_d - qm_c) + ph.torque_offset_nm
+                w_eng, mean_eng = _friction_step(
+                    w_new, j_after + j_r, drive_c + load_after, tau, ph
+                )
+                w_free = w_new + load_after / j_after * tau
+                w_end = np.where(engaged, w_eng, w_free)
+                mean = np.where(engaged, mean_eng, 0.5 * (w_new + w_free))
+                y = np.where(strike, r * np.sin(ql_c) + v_new * tau, y)
+                v = np.where(strike, np.where(now_glued, r * np.cos(ql_c) * w_end, v_new), v)
+                ql = np.where(strike, ql_c + mean * tau, ql)
+                qm = np.where(strike & engaged, qm_c + mean * tau, qm)
+                wl = np.where(strike, w_end, wl)
+                wm = np.where(strike & engaged, w_end, wm)
+                glued = now_glued
         t = np.arange(steps, dtype=float) * dt
         return t, out_q, out_y
 
 
 def _friction_step(
-    w: FloatArray, inertia: FloatArray, torque: FloatArray, dt: float, ph: DropPhysics
+    w: FloatArray, inertia: FloatArray, torque: FloatArray, dt: float | FloatArray, ph: DropPhysics
 ) -> tuple[FloatArray, FloatArray]:
     """(new velocity, mean velocity over the step) of a body under ``torque`` with Karnopp
     stick-slip friction; the viscous drag is integrated exactly for the step's torque (a plain
