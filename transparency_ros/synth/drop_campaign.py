@@ -53,7 +53,8 @@ _SAMPLERS: dict[str, Any] = {
     "backlash": lambda r, m, arm: {"backlash_rad": math.radians(r.uniform(0.8, 2.0))},
     "stiction": lambda r, m, arm: {"static_nm": r.uniform(0.3, 0.5)},
     "sensor_delay": lambda r, m, arm: {"delay_s": r.uniform(0.003, 0.008)},
-    "quantization": lambda r, m, arm: {"step_rad": 2 * math.pi / r.choice([512, 1024])},
+    # an 11- or 12-bit magnetic encoder on the output
+    "quantization": lambda r, m, arm: {"step_rad": 2 * math.pi / r.choice([2048, 4096])},
     "torque_offset": lambda r, m, arm: {"offset_nm": r.choice([-1, 1]) * r.uniform(0.08, 0.15)},
     "parameter_drift": lambda r, m, arm: {"viscous_scale": r.uniform(1.8, 2.5)},
     OUTSIDE: lambda r, m, arm: {"ripple": r.uniform(0.6, 0.8), "cycles_per_rev": 40.0},

@@ -46,6 +46,7 @@ from transparency_ros.analysis.discrepancy.model import (
 from transparency_ros.core.errors import ModelError
 
 GRID_POINTS = 25
+SIGNIFICANT = 1.5  # a held-out error within 1.5x the noise floor has nothing left to explain
 PHASES = ("stuck", "reversal", "slow", "fast")
 
 
@@ -407,7 +408,7 @@ class Discoverer:
         report.heldout_rmse_nominal = self._rmse(held_err)
         remaining = problem.candidates()
         floor = problem.noise_floor()
-        while remaining:
+        while remaining and self._rmse(held_err) > SIGNIFICANT * floor:
             passing: list[tuple[float, Any, FloatArray, Any, FloatArray, float]] = []
             base_rmse, base_aic = (
                 self._rmse(held_err),

@@ -306,13 +306,24 @@ class DropSimulator:
             zeta = -log_e / np.sqrt(math.pi**2 + log_e**2)
             damping = 2 * zeta * np.sqrt(ph.stiffness_n_per_m * m)
         weight = ph.weight_torque_nm
+        step = np.asarray(ph.encoder_step_rad, dtype=float)
+        lattice = np.where(step > 0, step, 1.0)
+
+        def sense(q: FloatArray) -> FloatArray:
+            """The position the controller sees: on the encoder's lattice."""
+            if not np.any(step > 0):
+                return q
+            return np.asarray(np.where(step > 0, np.round(q / lattice) * lattice, q), dtype=float)
+
         out_q = np.empty((n, steps))
         out_y = np.empty((n, steps))
         for k in range(steps):
             out_q[:, k], out_y[:, k] = qm, y
             cos = np.cos(ql)
             tip_y, tip_v = r * np.sin(ql), r * cos * wl
-            drive = k_s * (theta_d - qm) + ph.torque_offset_nm
+            # the impedance at the step's midpoint (predicted): the spring torque held at the
+            # step's start would lag by half a step, a steady error in the swing
+            drive = k_s * (theta_d - sense(qm) - 0.5 * wm * dt) + ph.torque_offset_nm
             # the shuttle's push on the arm, and the shuttle's own acceleration when free
             touching = glued.copy()
             if spring:
@@ -393,7 +404,7 @@ class DropSimulator:
                 qm_c = qm - wm * tau
                 j_after = j_a + np.where(now_glued, m * r * r, 0.0)
                 load_after = np.where(now_glued, -weight * np.cos(ql_c), 0.0)
-                drive_c = k_s * (theta_d - qm_c) + ph.torque_offset_nm
+                drive_c = k_s * (theta_d - sense(qm_c)) + ph.torque_offset_nm
                 w_eng, mean_eng = _friction_step(
                     w_new, j_after + j_r, drive_c + load_after, tau, ph
                 )
@@ -411,28 +422,44 @@ class DropSimulator:
         return t, out_q, out_y
 
 
-def _friction_step(
-    w: FloatArray, inertia: FloatArray, torque: FloatArray, dt: float | FloatArray, ph: DropPhysics
+def _drag_step(
+    w: FloatArray, accel: FloatArray, rate: FloatArray, dt: float | FloatArray
 ) -> tuple[FloatArray, FloatArray]:
-    """(new velocity, mean velocity over the step) of a body under ``torque`` with Karnopp
-    stick-slip friction; the viscous drag is integrated exactly for the step's torque (a plain
-    Euler step of b_v/J ~ 80 1/s at 0.5 ms would misstate the damping by percents)."""
-    at_rest = w == 0.0
-    direction = np.where(at_rest, np.sign(torque), np.sign(w))
-    accel = (torque - ph.coulomb_nm * direction) / inertia
-    x = ph.viscous_nms_per_rad * dt / inertia
+    """(velocity, displacement) after ``dt`` of w' = accel - rate w, exactly."""
+    x = rate * dt
     small = x < 1e-6
     safe = np.where(small, 1.0, x)
     decay = np.exp(-x)
     phi1 = np.where(small, 1.0 - x / 2, (1.0 - decay) / safe)
     phi2 = np.where(small, 0.5 - x / 6, (x - 1.0 + decay) / (safe * safe))
-    new = w * decay + accel * dt * phi1
-    mean = w * phi1 + accel * dt * phi2
-    # friction stops a moving body within the step: it rests from the (linear) zero crossing
+    return w * decay + accel * dt * phi1, (w * phi1 + accel * dt * phi2) * dt
+
+
+def _friction_step(
+    w: FloatArray, inertia: FloatArray, torque: FloatArray, dt: float | FloatArray, ph: DropPhysics
+) -> tuple[FloatArray, FloatArray]:
+    """(new velocity, mean velocity over the step) of a body under ``torque`` with Karnopp
+    stick-slip friction. The viscous drag is integrated exactly for the step's torque (a plain
+    Euler step of b_v/J ~ 80 1/s at 0.5 ms would misstate the damping by percents), and a
+    reversal within the step is located: the body stops there and, if the torque breaks the
+    static friction, moves the other way for the rest of the step (holding it still until the
+    next step would lose up to a step of motion at every reversal)."""
+    rate = ph.viscous_nms_per_rad / inertia
+    at_rest = w == 0.0
+    direction = np.where(at_rest, np.sign(torque), np.sign(w))
+    new, moved = _drag_step(w, (torque - ph.coulomb_nm * direction) / inertia, rate, dt)
     stops = ~at_rest & (new * w < 0.0)
-    mean = np.where(stops, w * w / (2.0 * np.where(stops, w - new, 1.0)), mean)
-    new = np.where(stops, 0.0, new)
+    if np.any(stops):
+        t0 = dt * w / np.where(stops, w - new, 1.0)  # the (linear) zero crossing
+        rest = np.clip(dt - t0, 0.0, None)
+        breaks = stops & (np.abs(torque) > ph.static_nm)
+        back = (torque - ph.coulomb_nm * np.sign(torque)) / inertia
+        w2, moved2 = _drag_step(np.zeros_like(w), back, rate, rest)
+        new = np.where(stops, np.where(breaks, w2, 0.0), new)
+        moved = np.where(stops, 0.5 * w * t0 + np.where(breaks, moved2, 0.0), moved)
     stuck = at_rest & (np.abs(torque) <= ph.static_nm)
+    step = np.broadcast_to(np.asarray(dt, dtype=float), np.shape(w))
+    mean = np.where(step > 0, moved / np.where(step > 0, step, 1.0), w)
     return (
         np.asarray(np.where(stuck, 0.0, new), dtype=float),
         np.asarray(np.where(stuck, 0.0, mean), dtype=float),
