@@ -141,10 +141,16 @@ class Shuttle:
         v_new = self.velocity_m_s - (1 + e) * big_m / (m + big_m) * u
         w_new = (tip_v + (1 + e) * m / (m + big_m) * u) / (r * cos)
         self.impulse_ns += m * abs(v_new - self.velocity_m_s)
-        self.velocity_m_s, self.height_m = v_new, tip_y
+        # the bodies met tau ago (checked every substep): from then on at the new velocities
+        tau = (tip_y - self.height_m) / max(tip_v - self.velocity_m_s, 1e-9)
+        shift = (w_new - s.load_velocity_rad_s) * tau
+        self.velocity_m_s = v_new
+        self.height_m = tip_y - tip_v * tau + v_new * tau
         s.load_velocity_rad_s = w_new
+        s.load_position_rad += shift
         if engaged:
             s.motor_velocity_rad_s = w_new
+            s.motor_position_rad += shift
         if e == 0.0:
             self.on_arm = True
 

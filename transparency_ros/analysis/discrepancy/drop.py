@@ -78,6 +78,8 @@ class DropTrial:
     contact_end_s: float  # first sample after it back below the threshold
     release_s: float
     held_height_m: float
+    # the fall's parabola h = c2 (t - mid)^2 + c1 (t - mid) + c0 as (c2, c1, c0, mid)
+    fall: tuple[float, float, float, float] | None = None
 
     @property
     def start_s(self) -> float:
@@ -130,7 +132,7 @@ def load_drop_trial(path: str | Path) -> DropTrial:
     contact_end = float(t_h[below[0]]) if below.size else contact + 0.02
     if q.size < 20 or np.count_nonzero(t_q < contact - LEAD_S) < 5:
         raise BagReadError(f"{p}: /joint_states has too few samples before contact")
-    held, release = _release(t_h, h, contact, p)
+    held, release, fall = _release(t_h, h, contact, p)
     return DropTrial(
         name=f"{p.parent.name}/{p.name}",
         actuator=custom["transparency.actuator"],
@@ -148,13 +150,17 @@ def load_drop_trial(path: str | Path) -> DropTrial:
         contact_end_s=contact_end,
         release_s=release,
         held_height_m=held,
+        fall=fall,
     )
 
 
-def _release(t: FloatArray, h: FloatArray, contact: float, where: Path) -> tuple[float, float]:
-    """(held height, release time). The fall under any constant force is a parabola
-    h0 - a/2 (t - t_r)^2, so its vertex is the release: a quadratic fitted to the whole fall
-    (up to the impact piece) gives t_r without assuming g or a rail without friction."""
+def _release(
+    t: FloatArray, h: FloatArray, contact: float, where: Path
+) -> tuple[float, float, tuple[float, float, float, float] | None]:
+    """(held height, release time, the fall's parabola). The fall under any constant force is
+    a parabola h0 - a/2 (t - t_r)^2, so its vertex is the release: a quadratic fitted to the
+    whole fall (up to the impact piece) gives t_r without assuming g or a rail without
+    friction, and the shuttle's state at the impact piece's start from all of the fall."""
     first = t < t[0] + 0.02
     held = float(np.median(h[first]))
     noise = float(np.median(np.abs(np.diff(h[first], n=2)))) / 0.6745 / math.sqrt(6)
@@ -163,12 +169,12 @@ def _release(t: FloatArray, h: FloatArray, contact: float, where: Path) -> tuple
         raise ModelError(f"{where}: no hold before the release in /shuttle/height")
     fit = (t >= t[gone[0]]) & (t < contact - LEAD_S)
     if np.count_nonzero(fit) < 10:
-        return held, float(t[gone[0]])
+        return held, float(t[gone[0]]), None
     mid = float(np.mean(t[fit]))
-    c2, c1, _ = np.polyfit(t[fit] - mid, h[fit], 2)
+    c2, c1, c0 = (float(c) for c in np.polyfit(t[fit] - mid, h[fit], 2))
     if c2 >= 0:
         raise ModelError(f"{where}: the shuttle does not fall after the release")
-    return held, float(mid - c1 / (2 * c2))
+    return held, mid - c1 / (2 * c2), (c2, c1, c0, mid)
 
 
 # ----------------------------------------------------------------------------- physics
@@ -387,18 +393,20 @@ class DropSimulator:
             tip_y, tip_v = r * np.sin(ql), r * np.cos(ql) * wl
             strike = free & (y <= tip_y) & (v - tip_v < 0)
             if strike.any():
+                # the collision happened tau before the end of this step: go back to it,
+                # exchange momentum there, and integrate the rest of the step from the new
+                # velocities (gravity and a geared actuator's drag change the speeds within a
+                # step by more than the model may miss)
+                tau = np.clip((tip_y - y) / np.maximum(tip_v - v, 1e-9), 0.0, dt)
+                v_c = v - acc_y * tau  # the shuttle's speed when they met
                 j_hit = j_load + np.where(engaged, j_r, 0.0)
                 big_m = j_hit / (r * np.cos(ql)) ** 2  # the struck body's mass at the tip
-                u = v - tip_v
+                u = v_c - tip_v
                 stays = np.abs(u) * ph.restitution < GLUE_SPEED_M_S
                 e = np.where(stays, 0.0, ph.restitution)
-                v_new = v - (1 + e) * big_m / (m + big_m) * u
+                v_new = v_c - (1 + e) * big_m / (m + big_m) * u
                 tip_new = tip_v + (1 + e) * m / (m + big_m) * u
                 w_new = tip_new / (r * np.cos(ql))
-                # the collision happened tau before the end of this step: go back to it and
-                # integrate the rest of the step from the new velocities (the drag of a geared
-                # actuator changes the speed by percents within a step)
-                tau = np.clip((tip_y - y) / np.maximum(tip_v - v, 1e-9), 0.0, dt)
                 now_glued = glued | (strike & stays)
                 ql_c = ql - wl * tau
                 qm_c = qm - wm * tau
@@ -412,7 +420,9 @@ class DropSimulator:
                 w_end = np.where(engaged, w_eng, w_free)
                 mean = np.where(engaged, mean_eng, 0.5 * (w_new + w_free))
                 y = np.where(strike, r * np.sin(ql_c) + v_new * tau, y)
-                v = np.where(strike, np.where(now_glued, r * np.cos(ql_c) * w_end, v_new), v)
+                v = np.where(
+                    strike, np.where(now_glued, r * np.cos(ql_c) * w_end, v_new + acc_y * tau), v
+                )
                 ql = np.where(strike, ql_c + mean * tau, ql)
                 qm = np.where(strike & engaged, qm_c + mean * tau, qm)
                 wl = np.where(strike, w_end, wl)
@@ -472,7 +482,12 @@ def _rest_position(trial: DropTrial) -> float:
 
 
 def _shuttle_state(trial: DropTrial) -> tuple[float, float]:
-    """Height and velocity at the impact piece's start, from a quadratic over the 15 ms before."""
+    """Height and velocity at the impact piece's start: from the fall's parabola, or a
+    quadratic over the 15 ms before when the fall is too short to fit."""
+    if trial.fall is not None:
+        c2, c1, c0, mid = trial.fall
+        dt = trial.start_s - mid
+        return c2 * dt * dt + c1 * dt + c0, 2 * c2 * dt + c1
     sel = (trial.t_h >= trial.start_s - 0.015) & (trial.t_h < trial.start_s)
     if np.count_nonzero(sel) < 5:
         raise ModelError(f"{trial.name}: too few shuttle samples before contact")
