@@ -46,6 +46,7 @@ from transparency_ros.analysis.discrepancy.model import (
 from transparency_ros.core.errors import ModelError
 
 GRID_POINTS = 25
+STATE_EXPLAINED = 0.3  # below: the leftover torque is not a function of the state
 SIGNIFICANT = 1.5  # a held-out error within 1.5x the noise floor has nothing left to explain
 PHASES = ("stuck", "reversal", "slow", "fast")
 
@@ -279,6 +280,35 @@ class TorqueDrivenProblem:
             final,
             "position [rad]",
         )
+
+    def state_explained(
+        self, effects: Sequence[Effect], params: Sequence[FloatArray], bins: int = 12
+    ) -> float:
+        """Share of the held-out torque residual (inverse dynamics, after the found torque
+        effects) that a function of position and velocity learnt on the fitting trials
+        predicts: a 12 x 12 table of mean residuals over (q, q'). Near 0: the leftover is not
+        physics of the joint's state, but an input the model does not see."""
+
+        def residual(trials: Sequence[Trial]) -> tuple[FloatArray, FloatArray, FloatArray]:
+            model = self.model
+            for effect, p in zip(effects, params, strict=True):
+                model = effect.adjust(model, p)
+            q, qd, r = inverse_dynamics_residual(model, trials)
+            for effect, p in zip(effects, params, strict=True):
+                r = r - np.broadcast_to(effect.torque(q, qd, p), r.shape)
+            return q, qd, r
+
+        q, qd, r = residual(self.fit_trials)
+        q_edges = np.quantile(q, np.linspace(0, 1, bins + 1)[1:-1])
+        v_edges = np.quantile(qd, np.linspace(0, 1, bins + 1)[1:-1])
+        cell = np.digitize(q, q_edges) * bins + np.digitize(qd, v_edges)
+        total = np.bincount(cell, r, bins * bins)
+        count = np.bincount(cell, minlength=bins * bins)
+        table = np.where(count > 0, total / np.maximum(count, 1), 0.0)
+        hq, hqd, hr = residual(self.held_trials)
+        predicted = table[np.digitize(hq, q_edges) * bins + np.digitize(hqd, v_edges)]
+        variance = float(np.var(hr))
+        return 1.0 - float(np.var(hr - predicted)) / variance if variance > 0 else 0.0
 
 
 def position_noise(q: FloatArray) -> float:
@@ -536,6 +566,7 @@ class Discoverer:
         floor = self.problem.noise_floor()
         out = []
         peak: float | None = None
+        explained: float | None = None
         for name, mask in self.problem.phases().items():
             if mask.sum() < 50:
                 continue
@@ -543,16 +574,30 @@ class Discoverer:
             if rms > 3 * floor:
                 if peak is None:
                     peak = self.problem.residual_peak_hz(effects, params)
-                out.append(
-                    {
-                        "where": {"phase": name},
-                        "rmse_rad": rms,
-                        "noise_floor_rad": floor,
-                        "dominant_frequency_hz": peak,
-                        "looks_like": f"residual {rms / floor:.0f}x the noise floor in phase "
-                        f"'{name}'; the residual peaks near {peak:.1f} Hz",
-                    }
-                )
+                    explained = getattr(self.problem, "state_explained", lambda *_: None)(
+                        effects, params
+                    )
+                entry: dict[str, Any] = {
+                    "where": {"phase": name},
+                    "rmse_rad": rms,
+                    "noise_floor_rad": floor,
+                    "dominant_frequency_hz": peak,
+                    "looks_like": f"residual {rms / floor:.0f}x the noise floor in phase "
+                    f"'{name}'; the residual peaks near {peak:.1f} Hz",
+                }
+                if explained is not None:
+                    entry["state_explained_fraction"] = explained
+                    entry["looks_like"] += (
+                        f"; position and velocity explain {max(explained, 0.0):.0%} of the "
+                        "torque residual on held-out trials"
+                        + (
+                            " (not a function of the state: an input the model does not see, "
+                            "such as a hand or a contact)"
+                            if explained < STATE_EXPLAINED
+                            else ""
+                        )
+                    )
+                out.append(entry)
         return out
 
 

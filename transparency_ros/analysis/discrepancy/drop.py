@@ -41,7 +41,7 @@ from transparency_ros.analysis.discrepancy.discover import (
     position_noise,
     spectrum_peak,
 )
-from transparency_ros.analysis.discrepancy.effects import drifted
+from transparency_ros.analysis.discrepancy.effects import drifted, pinned
 from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
 from transparency_ros.core.config import finite_number, get_actuator, load_drop_test
 from transparency_ros.core.errors import ConfigError, ModelError
@@ -542,7 +542,7 @@ class DropDrift(DropEffect):
         )
 
     def meaningful(self, p: FloatArray) -> bool:
-        return drifted(p)
+        return drifted(p) and not pinned(p, self.lower, self.upper)
 
 
 class DropTorqueOffset(DropEffect):
@@ -741,9 +741,7 @@ class DropProblem:
         self.fit = _Set(self.fit_trials)
         self.held = _Set(self.held_trials)
         self.model = nominal
-        # several effects act together in every drop (eq. (2) leaves out much): a kept effect
-        # must remove a fifth of the error above the noise floor, not half
-        self.min_improvement = 0.2
+        self.min_improvement = 0.5
         self._candidates = list(candidates) if candidates is not None else drop_library()
         for c in self._candidates:
             if isinstance(c, ImpactSpeedLoss):

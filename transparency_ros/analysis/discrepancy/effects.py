@@ -240,7 +240,7 @@ class ParameterDrift(Effect):
         return np.ones(4)
 
     def meaningful(self, p: FloatArray) -> bool:
-        return drifted(p)
+        return drifted(p) and not pinned(p, self.lower, self.upper)
 
     def adjust(self, model: NominalModel, p: FloatArray) -> NominalModel:
         return replace(
@@ -253,6 +253,17 @@ DRIFT_MIN = 0.2  # a nominal value counts as wrong when off by more than 20 %
 
 def drifted(scales: FloatArray) -> bool:
     return bool(np.any(np.abs(np.asarray(scales) - 1.0) > DRIFT_MIN))
+
+
+def pinned(p: FloatArray, lower: Sequence[float], upper: Sequence[float]) -> bool:
+    """A fit held at a bound of its plausible range (a scale of 5, an inertia cut to a fifth):
+    the drift then stands in for something it cannot be. A scale of 0 (a term that is not
+    there) is plausible."""
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    x = np.asarray(p, dtype=float)
+    return bool(
+        np.any(x >= hi - 0.01 * (hi - lo)) or np.any((lo > 0) & (x <= lo + 0.01 * (hi - lo)))
+    )
 
 
 def library() -> list[Effect]:
