@@ -48,10 +48,12 @@ from transparency_ros.core.errors import ConfigError, ModelError
 
 BoolArray = npt.NDArray[np.bool_]
 STEP_S = 5e-4  # integration step (instant collisions)
+BOUNCE_STEP_S = 2e-4  # when the shuttle may bounce: rebounds decide where the next strike is
 SPRING_STEP_S = 2e-4  # when the contact is a spring (omega dt <= 0.3 up to 1e6 N/m)
 LEAD_S = 0.003  # the impact piece starts this long before the recorded contact
 AFTER_S = 0.25  # and lasts this long after it
 GLUE_SPEED_M_S = 0.05  # a bounce slower than this ends the bouncing
+MAX_STRIKES = 4  # collisions located within one step
 PHASES = ("before_contact", "impact", "deflection", "rebound", "reversal", "stuck")
 
 
@@ -294,7 +296,8 @@ class DropSimulator:
         if finite.any() and not finite.all():
             raise ModelError("rows simulated together must all have a contact spring, or none")
         spring = bool(finite.all())
-        dt = SPRING_STEP_S if spring else STEP_S
+        bouncing = bool(np.any(np.asarray(ph.restitution) > 0))
+        dt = SPRING_STEP_S if spring else BOUNCE_STEP_S if bouncing else STEP_S
         steps = math.ceil(self.duration / dt) + 1
         m, r, k_s = (np.tile(a, tiles) for a in (self.mass, self.arm, self.k_s))
         theta_d = np.tile(self.theta_d, tiles)
@@ -390,14 +393,19 @@ class DropSimulator:
             v = np.where(free, v + acc_y * dt, v)
             y = np.where(free, y + v * dt, r * np.sin(ql))
             v = np.where(free, v, r * np.cos(ql) * wl)
-            tip_y, tip_v = r * np.sin(ql), r * np.cos(ql) * wl
-            strike = free & (y <= tip_y) & (v - tip_v < 0)
-            if strike.any():
+            # a bounce may strike again within the same step: up to a few collisions per step,
+            # each no later than the one before
+            window = np.full(n, dt)
+            for _ in range(MAX_STRIKES):
+                tip_y, tip_v = r * np.sin(ql), r * np.cos(ql) * wl
+                strike = ~glued & (y <= tip_y) & (v - tip_v < 0)
+                if not strike.any():
+                    break
                 # the collision happened tau before the end of this step: go back to it,
                 # exchange momentum there, and integrate the rest of the step from the new
                 # velocities (gravity and a geared actuator's drag change the speeds within a
                 # step by more than the model may miss)
-                tau = np.clip((tip_y - y) / np.maximum(tip_v - v, 1e-9), 0.0, dt)
+                tau = np.clip((tip_y - y) / np.maximum(tip_v - v, 1e-9), 0.0, window)
                 v_c = v - acc_y * tau  # the shuttle's speed when they met
                 j_hit = j_load + np.where(engaged, j_r, 0.0)
                 big_m = j_hit / (r * np.cos(ql)) ** 2  # the struck body's mass at the tip
@@ -428,6 +436,7 @@ class DropSimulator:
                 wl = np.where(strike, w_end, wl)
                 wm = np.where(strike & engaged, w_end, wm)
                 glued = now_glued
+                window = np.where(strike, tau, window)
         t = np.arange(steps, dtype=float) * dt
         return t, out_q, out_y
 
