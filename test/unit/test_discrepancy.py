@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from transparency_ros.analysis.discrepancy.discover import discover
+from transparency_ros.analysis.discrepancy.effects import ParameterDrift, library
 from transparency_ros.analysis.discrepancy.model import Trial, load_nominal
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.synth.campaign import OUTSIDE, write_campaign
@@ -83,6 +84,38 @@ def test_an_effect_outside_the_library_is_unexplained_not_forced(tmp_path: Path)
     for item in report.unexplained:  # type: ignore[attr-defined]
         assert item["dominant_frequency_hz"] == pytest.approx(truth, abs=0.5)
     assert all("noise floor" in u["looks_like"] for u in report.unexplained)  # type: ignore[attr-defined]
+    # a torque that follows time, not the joint's state: position and velocity do not predict it
+    for item in report.unexplained:  # type: ignore[attr-defined]
+        assert item["state_explained_fraction"] < 0.3
+        assert "not a function of the state" in item["looks_like"]
+
+
+def test_a_leftover_that_is_physics_of_the_state_is_told_apart(tmp_path: Path) -> None:
+    # cogging is a function of position; with cogging taken out of the library the tool must
+    # leave it unexplained and say that position and velocity predict it
+    out = write_campaign(tmp_path / "campaign", 3, hidden=["cogging"])
+    trials = [
+        Trial(f.stem, *np.loadtxt(f, delimiter=",", skiprows=1).T)
+        for f in sorted((out / "data").glob("*.csv"))
+    ]
+    report = discover(
+        load_nominal(out / "nominal.yaml"),
+        trials,
+        candidates=[e for e in library() if e.name != "cogging"],
+    )
+    assert report.unexplained
+    for item in report.unexplained:
+        assert item["state_explained_fraction"] > 0.3
+        assert "not a function of the state" not in item["looks_like"]
+
+
+def test_a_drift_pinned_at_its_bound_names_nothing() -> None:
+    drift = ParameterDrift()
+    assert drift.meaningful(np.array([1.0, 2.0, 1.0, 1.0]))
+    assert not drift.meaningful(np.array([1.0, 1.1, 1.0, 1.0]))  # within 20 %: nothing wrong
+    assert not drift.meaningful(np.array([1.0, 5.0, 1.0, 1.0]))  # held at the upper bound
+    assert not drift.meaningful(np.array([0.2, 1.0, 1.0, 1.0]))  # inertia cut to a fifth
+    assert drift.meaningful(np.array([1.0, 1.0, 0.0, 1.0]))  # no Coulomb friction at all
 
 
 def test_nominal_specs_are_validated(tmp_path: Path) -> None:

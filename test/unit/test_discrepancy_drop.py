@@ -39,15 +39,39 @@ def test_with_nothing_hidden_eq2_fits_to_the_noise_and_nothing_is_named(tmp_path
     assert report.findings == []
 
 
-def test_the_shuttles_weight_on_the_arm_is_found_and_measured(tmp_path: Path) -> None:
+def test_the_shuttles_weight_on_the_arm_is_found_and_measured_through_the_command(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from transparency_ros.cli import main  # noqa: PLC0415
+
     out = write_drop_campaign(tmp_path / "c", 2, hidden=["payload_gravity"], actuator="EC60")
-    report = Discoverer(_problem(out)).run()
+    report_dir = tmp_path / "report"
+    assert main(["discrepancy", str(out / "bags"), "--json", "--report", str(report_dir)]) == 0
+    report = json.loads(capsys.readouterr().out)
     truth = json.loads((out / "labels.json").read_text())["hidden"]["payload_gravity"]
-    first = report.findings[0]
-    assert first.effect == "payload_gravity"
-    assert first.parameters["mgl_nm"] == pytest.approx(truth["mgl_nm"], rel=0.05)
-    assert first.heldout_rmse_after < 0.1 * first.heldout_rmse_before
-    assert first.where["phase"] in {"deflection", "rebound", "stuck", "reversal"}
+    first = report["findings"][0]
+    assert first["effect"] == "payload_gravity"
+    assert first["parameters"]["mgl_nm"] == pytest.approx(truth["mgl_nm"], rel=0.05)
+    assert first["heldout_rmse_after"] < 0.1 * first["heldout_rmse_before"]
+    assert first["where"]["phase"] in {"deflection", "rebound", "stuck", "reversal"}
+    assert set(report["nominal"]) == {
+        "EC60.reflected_inertia_kgm2",
+        "EC60.viscous_nms_per_rad",
+        "EC60.coulomb_nm",
+    }
+    assert (report_dir / "discrepancy.png").stat().st_size > 10_000
+    assert "payload_gravity" in (report_dir / "improvement.md").read_text()
+
+
+def test_rail_friction_is_found_where_it_acts_before_contact(tmp_path: Path) -> None:
+    out = write_drop_campaign(tmp_path / "c", 7, hidden=["impact_speed_loss"], actuator="EC60")
+    report = Discoverer(_problem(out)).run()
+    truth = json.loads((out / "labels.json").read_text())["hidden"]["impact_speed_loss"]
+    (finding,) = report.findings
+    assert finding.effect == "impact_speed_loss"
+    assert finding.where["phase"] == "before_contact"
+    assert finding.parameters["rail_friction_n"] == pytest.approx(truth["rail_friction_n"], rel=0.1)
+    assert 0 < finding.parameters["speed_loss_fraction"] < 0.2
 
 
 def test_gearbox_backlash_is_found_with_its_width(tmp_path: Path) -> None:
