@@ -523,7 +523,9 @@ class DropEffect:
         raise NotImplementedError
 
     def meaningful(self, p: FloatArray) -> bool:
-        return True
+        """A fit held at a bound of its plausible range (a restitution of 0.95, a 3 degree
+        backlash, a rigid contact) stands in for something else: it names nothing."""
+        return not pinned(p, self.lower, self.upper)
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {}
