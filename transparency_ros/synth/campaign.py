@@ -60,6 +60,16 @@ _SAMPLERS = {
 }
 
 
+def draw_hidden(rng: random.Random, effects: Sequence[str], outside: str) -> list[str]:
+    """Which effects a campaign hides: one (half the time), a pair, none, or the outside one."""
+    kind = rng.choice(["single", "single", "single", "pair", "none", "outside"])
+    if kind == "single":
+        return [rng.choice(effects)]
+    if kind == "pair":
+        return rng.sample(list(effects), 2)
+    return [] if kind == "none" else [outside]
+
+
 def draw_effect(name: str, rng: random.Random) -> dict[str, float]:
     """Random true parameters of a hidden effect."""
     sampler: Any = _SAMPLERS[name]
@@ -133,13 +143,7 @@ def write_campaign(
     """Write trials as CSV (time, position, velocity, torque) and labels.json apart."""
     rng = random.Random(seed)
     if hidden is None:
-        kind = rng.choice(["single", "single", "single", "pair", "none", "outside"])
-        if kind == "single":
-            hidden = [rng.choice(EFFECTS)]
-        elif kind == "pair":
-            hidden = rng.sample(list(EFFECTS), 2)
-        else:
-            hidden = [] if kind == "none" else [OUTSIDE]
+        hidden = draw_hidden(rng, EFFECTS, OUTSIDE)
     plant = Plant(hidden={name: draw_effect(name, rng) for name in hidden})
     data = out / "data"
     data.mkdir(parents=True, exist_ok=True)

@@ -26,6 +26,7 @@ import numpy as np
 
 from transparency_ros.core.actuator_physics import ActuatorPhysics, ImpedanceLaw, PhysicsParams
 from transparency_ros.core.config import get_actuator, load_drop_test
+from transparency_ros.synth.campaign import draw_hidden
 
 GRAVITY = 9.81
 EFFECTS = (
@@ -249,13 +250,7 @@ def write_drop_campaign(
     rng = random.Random(seed)
     actuator = actuator or rng.choice(ACTUATORS)
     if hidden is None:
-        kind = rng.choice(["single", "single", "single", "pair", "none", "outside"])
-        if kind == "single":
-            hidden = [rng.choice(EFFECTS)]
-        elif kind == "pair":
-            hidden = rng.sample(list(EFFECTS), 2)
-        else:
-            hidden = [] if kind == "none" else [OUTSIDE]
+        hidden = draw_hidden(rng, EFFECTS, OUTSIDE)
     drop = load_drop_test()
     m, r = drop.shuttle_mass_for(actuator), drop.arm_length_m
     truth = {name: draw_effect(name, rng, m, r) for name in hidden}
@@ -270,40 +265,31 @@ def write_drop_campaign(
         "transparency.arm_length_m": str(r),
         "transparency.arm_inertia_kgm2": str(drop.arm_inertia_kgm2),
     }
+    header = types["std_msgs/msg/Header"]
+
+    def joint(ns: int, position: float, effort: float) -> Any:
+        return types["sensor_msgs/msg/JointState"](
+            header=header(stamp=time_msg(ns), frame_id=""),
+            name=["joint"],
+            position=np.array([position]),
+            velocity=np.zeros(1),
+            effort=np.array([effort]),
+        )
+
     for i, height in enumerate(heights):
         data = simulate_drop(actuator, height, truth, seed * 100 + i)
         bag = out / "bags" / actuator / f"h{height * 1000:06.1f}mm"
-        header = types["std_msgs/msg/Header"]
         with BagWriter(bag, custom | {"transparency.drop_height_m": str(height)}) as w:
             w.add("/joint_states", "sensor_msgs/msg/JointState")
             w.add("/joint_commands", "sensor_msgs/msg/JointState")
             w.add("/load_cell", "geometry_msgs/msg/WrenchStamped")
             w.add("/shuttle/height", "geometry_msgs/msg/PointStamped")
             ns0 = round(BASE_STAMP_S * 1e9)
-            w.write_message(
-                "/joint_commands",
-                ns0,
-                types["sensor_msgs/msg/JointState"](
-                    header=header(stamp=time_msg(ns0), frame_id=""),
-                    name=["joint"],
-                    position=np.zeros(1),
-                    velocity=np.zeros(1),
-                    effort=np.zeros(1),
-                ),
-            )
+
+            w.write_message("/joint_commands", ns0, joint(ns0, 0.0, 0.0))  # theta_d = 0
             for t, q in zip(data["t_q"], data["q"], strict=True):
                 ns = ns0 + round(t * 1e9)
-                w.write_message(
-                    "/joint_states",
-                    ns,
-                    types["sensor_msgs/msg/JointState"](
-                        header=header(stamp=time_msg(ns), frame_id=""),
-                        name=["joint"],
-                        position=np.array([q]),
-                        velocity=np.zeros(1),
-                        effort=np.array([-drop.k_s_nm_per_rad * q]),
-                    ),
-                )
+                w.write_message("/joint_states", ns, joint(ns, q, -drop.k_s_nm_per_rad * q))
             vec, wrench = types["geometry_msgs/msg/Vector3"], types["geometry_msgs/msg/Wrench"]
             point = types["geometry_msgs/msg/Point"]
             for t, h, f in zip(data["t_daq"], data["height"], data["force"], strict=True):

@@ -28,13 +28,13 @@ integrated together, vectorised over trials, with a fixed step.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import yaml
 
 from transparency_ros.analysis.discrepancy.discover import (
     Trace,
@@ -42,7 +42,7 @@ from transparency_ros.analysis.discrepancy.discover import (
     spectrum_peak,
 )
 from transparency_ros.analysis.discrepancy.effects import drifted, pinned
-from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
+from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray, read_spec
 from transparency_ros.core.config import finite_number, get_actuator, load_drop_test
 from transparency_ros.core.errors import ConfigError, ModelError
 
@@ -249,12 +249,7 @@ def load_drop_nominal(path: str | Path | None, trials: Sequence[DropTrial]) -> D
         values["coulomb_nm"][name] = a.coulomb_friction_nm
     if path is not None:
         p = Path(path)
-        try:
-            data = yaml.safe_load(p.read_text())
-        except (OSError, yaml.YAMLError) as err:
-            raise ConfigError(f"{p}: cannot read the nominal model: {err}") from err
-        if not isinstance(data, Mapping):
-            raise ConfigError(f"{p}: a nominal model is a mapping of terms")
+        data = read_spec(p)
         unknown = sorted(set(data) - set(values))
         if unknown:
             raise ConfigError(f"{p}: unknown drop-test terms {unknown}; known: {list(values)}")
@@ -556,25 +551,16 @@ class DropDrift(DropEffect):
         return drifted(p) and not pinned(p, self.lower, self.upper)
 
 
-class DropTorqueOffset(DropEffect):
-    def __init__(self) -> None:
-        super().__init__("torque_offset", ("offset_nm",), (-2.0,), (2.0,))
+class SetPhysics(DropEffect):
+    """An effect that sets one value of the physics to its single parameter."""
 
-    def initial(self, problem: DropProblem) -> FloatArray:
-        return np.zeros(1)
-
-    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return replace(ph, torque_offset_nm=float(p[0]))
-
-
-class DropPayloadGravity(DropEffect):
-    """The shuttle's weight on the arm: m_s g r cos(theta) while they touch."""
-
-    def __init__(self) -> None:
-        super().__init__("payload_gravity", ("mgl_nm",), (0.0,), (5.0,))
+    def __init__(self, name: str, param: str, lower: float, upper: float, target: str) -> None:
+        super().__init__(name, (param,), (lower,), (upper,))
+        self.target = target
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return replace(ph, weight_torque_nm=float(p[0]))
+        changes: dict[str, Any] = {self.target: float(p[0])}
+        return replace(ph, **changes)
 
 
 class DropStiction(DropEffect):
@@ -585,22 +571,11 @@ class DropStiction(DropEffect):
         return replace(ph, static_nm=np.maximum(ph.coulomb_nm, float(p[0])))
 
 
-class Restitution(DropEffect):
-    def __init__(self) -> None:
-        super().__init__("restitution", ("coefficient",), (0.0,), (0.95,))
-
-    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return replace(ph, restitution=float(p[0]))
-
-
-class ImpactSpeedLoss(DropEffect):
+class ImpactSpeedLoss(SetPhysics):
     """Rail friction: the shuttle arrives slower than free fall."""
 
     def __init__(self) -> None:
-        super().__init__("impact_speed_loss", ("rail_friction_n",), (0.0,), (5.0,))
-
-    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return replace(ph, rail_friction_n=float(p[0]))
+        super().__init__("impact_speed_loss", "rail_friction_n", 0.0, 5.0, "rail_friction_n")
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         # v^2 = 2 (g - F/m) h: the fraction of the free-fall speed lost at impact
@@ -624,22 +599,6 @@ class StructuralCompliance(DropEffect):
         return {"stiffness_n_per_m": float(10 ** p[0])}
 
 
-class Backlash(DropEffect):
-    def __init__(self) -> None:
-        super().__init__("backlash", ("backlash_rad",), (0.0,), (0.05,))
-
-    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return replace(ph, backlash_rad=float(p[0]))
-
-
-class DropSensorDelay(DropEffect):
-    def __init__(self) -> None:
-        super().__init__("sensor_delay", ("delay_s",), (0.0,), (0.02,))
-
-    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return replace(ph, delay_s=float(p[0]))
-
-
 class DropQuantization(DropEffect):
     def __init__(self) -> None:
         super().__init__("quantization", ("step_rad",), (1e-7,), (0.1,), fittable=False)
@@ -656,14 +615,15 @@ class DropQuantization(DropEffect):
 def drop_library() -> list[DropEffect]:
     return [
         DropDrift(),
-        DropTorqueOffset(),
-        DropPayloadGravity(),
+        SetPhysics("torque_offset", "offset_nm", -2.0, 2.0, "torque_offset_nm"),
+        # the shuttle's weight on the arm, m_s g r cos(theta), while they touch
+        SetPhysics("payload_gravity", "mgl_nm", 0.0, 5.0, "weight_torque_nm"),
         DropStiction(),
-        Restitution(),
+        SetPhysics("restitution", "coefficient", 0.0, 0.95, "restitution"),
         ImpactSpeedLoss(),
         StructuralCompliance(),
-        Backlash(),
-        DropSensorDelay(),
+        SetPhysics("backlash", "backlash_rad", 0.0, 0.05, "backlash_rad"),
+        SetPhysics("sensor_delay", "delay_s", 0.0, 0.02, "delay_s"),
         DropQuantization(),
     ]
 

@@ -56,17 +56,23 @@ class NominalModel:
         return {name: float(getattr(self, name)) for name in NOMINAL_TERMS}
 
 
+def read_spec(path: Path) -> Mapping[str, Any]:
+    """The mapping of terms in a nominal-model YAML file."""
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise ConfigError(f"{path}: cannot read the nominal model: {err}") from err
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{path}: a nominal model is a mapping of terms")
+    return data
+
+
 def load_nominal(path: str | Path) -> NominalModel:
     """A nominal model from a YAML spec: ``{inertia_kgm2: .., viscous_nms_per_rad: .., ...}``,
     or the parameter file format of the DFKI simple pendulum (mass, length, inertia, damping,
     coulomb_fric, gravity)."""
     p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f"{p}: cannot read the nominal model: {err}") from err
-    if not isinstance(data, Mapping):
-        raise ConfigError(f"{p}: a nominal model is a mapping of terms")
+    data = read_spec(p)
     if "mass" in data and "length" in data:  # DFKI pendulum parameters
         m = finite_number(data["mass"], f"{p}: mass")
         length = finite_number(data["length"], f"{p}: length")
