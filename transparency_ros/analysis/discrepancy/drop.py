@@ -574,16 +574,17 @@ class DropStiction(DropEffect):
 class ImpactSpeedLoss(SetPhysics):
     """Rail friction: the shuttle arrives slower than free fall."""
 
-    def __init__(self) -> None:
+    def __init__(self, shuttle_mass_kg: float) -> None:
         super().__init__("impact_speed_loss", "rail_friction_n", 0.0, 5.0, "rail_friction_n")
+        self.shuttle_mass_kg = shuttle_mass_kg
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         # v^2 = 2 (g - F/m) h: the fraction of the free-fall speed lost at impact
         return {
-            "speed_loss_fraction": float(1 - math.sqrt(max(0.0, 1 - p[0] / (self._m * GRAVITY))))
+            "speed_loss_fraction": float(
+                1 - math.sqrt(max(0.0, 1 - p[0] / (self.shuttle_mass_kg * GRAVITY)))
+            )
         }
-
-    _m: float = 1.0
 
 
 class StructuralCompliance(DropEffect):
@@ -612,7 +613,7 @@ class DropQuantization(DropEffect):
         return replace(ph, encoder_step_rad=float(p[0]))
 
 
-def drop_library() -> list[DropEffect]:
+def drop_library(shuttle_mass_kg: float) -> list[DropEffect]:
     return [
         DropDrift(),
         SetPhysics("torque_offset", "offset_nm", -2.0, 2.0, "torque_offset_nm"),
@@ -620,7 +621,7 @@ def drop_library() -> list[DropEffect]:
         SetPhysics("payload_gravity", "mgl_nm", 0.0, 5.0, "weight_torque_nm"),
         DropStiction(),
         SetPhysics("restitution", "coefficient", 0.0, 0.95, "restitution"),
-        ImpactSpeedLoss(),
+        ImpactSpeedLoss(shuttle_mass_kg),
         StructuralCompliance(),
         SetPhysics("backlash", "backlash_rad", 0.0, 0.05, "backlash_rad"),
         SetPhysics("sensor_delay", "delay_s", 0.0, 0.02, "delay_s"),
@@ -713,10 +714,8 @@ class DropProblem:
         self.held = _Set(self.held_trials)
         self.model = nominal
         self.min_improvement = 0.5
-        self._candidates = list(candidates) if candidates is not None else drop_library()
-        for c in self._candidates:
-            if isinstance(c, ImpactSpeedLoss):
-                c._m = float(np.mean([t.mass_kg for t in trials]))
+        mass = float(np.mean([t.mass_kg for t in trials]))
+        self._candidates = list(candidates) if candidates is not None else drop_library(mass)
         self.nominal = {
             k: v for k, v in nominal.as_dict().items() if k.startswith(f"{self.actuator}.")
         }
