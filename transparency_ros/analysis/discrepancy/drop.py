@@ -671,9 +671,12 @@ class _Set:
                 t_q, q = self.q[i]
                 q_model = np.interp(t_q - delay_s[row], t_sim, q_sim[row])
                 step = step_rad[row]
+                miss = q_model - q
                 if step > 0:
-                    q_model = np.round(q_model / step) * step
-                parts.append(q_model - q)
+                    # a reading of k counts says the arm was within half a count of k steps:
+                    # the model errs only by how far it is outside that interval
+                    miss = np.sign(miss) * np.maximum(np.abs(miss) - step / 2, 0.0)
+                parts.append(miss)
                 t_h, h = self.h[i]
                 parts.append((np.interp(t_h, t_sim, y_sim[row]) - h) / r)
             out.append(np.concatenate(parts))
