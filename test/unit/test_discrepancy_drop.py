@@ -94,3 +94,15 @@ def test_a_drop_bag_loads_and_a_missing_one_is_named(tmp_path: Path) -> None:
     assert trial.release_s < trial.contact_s < trial.contact_end_s
     with pytest.raises(BagReadError, match="missing"):
         load_drop_trial(tmp_path / "missing")
+    # a bag whose custom_data is not a number is refused, naming the key and the value
+    from transparency_ros.bag.reader import open_bag  # noqa: PLC0415
+    from transparency_ros.bag.writer import BagWriter  # noqa: PLC0415
+
+    with open_bag(bag) as good:
+        custom = dict(good.custom_data)
+    custom["transparency.k_s"] = "two"
+    broken = tmp_path / "broken"
+    with BagWriter(broken, custom) as w:
+        w.add("/joint_states", "sensor_msgs/msg/JointState")
+    with pytest.raises(BagReadError, match=r"transparency.k_s': 'two'"):
+        load_drop_trial(broken)

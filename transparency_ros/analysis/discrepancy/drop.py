@@ -101,16 +101,15 @@ def load_drop_trial(path: str | Path) -> DropTrial:
     p = Path(path)
     with open_bag(p) as bag:
         custom = bag.require_custom(*CUSTOM_KEYS, "transparency.arm_inertia_kgm2")
-        try:
-            numbers = {k: float(custom[k]) for k in custom if k != "transparency.actuator"}
-            numbers = {k: v for k, v in numbers.items() if math.isfinite(v)}
-        except ValueError:
-            numbers = {}
-        missing = [
-            k for k in (*CUSTOM_KEYS[1:], "transparency.arm_inertia_kgm2") if k not in numbers
-        ]
-        if missing:
-            raise BagReadError(f"{p}: custom_data {missing} must be finite numbers")
+        numbers: dict[str, float] = {}
+        for key in (*CUSTOM_KEYS[1:], "transparency.arm_inertia_kgm2"):
+            try:
+                numbers[key] = float(custom[key])
+            except ValueError:
+                numbers[key] = math.nan
+        bad = {k: custom[k] for k, v in numbers.items() if not math.isfinite(v)}
+        if bad:
+            raise BagReadError(f"{p}: custom_data must hold finite numbers, got {bad}")
         states = joint_series(bag, "/joint_states")
         force = scalar_series(
             bag, "/load_cell", "geometry_msgs/msg/WrenchStamped", "wrench.force.z"
