@@ -139,15 +139,11 @@ class Problem(Protocol):
         """Simulation error [rad] of every compared sample, 1-D, fitting or held-out trials."""
         ...
 
-    def error_many(
-        self,
-        effects: Sequence[Any],
-        params: Sequence[FloatArray],
-        new: Any,
-        xs: Sequence[FloatArray],
-        held: bool,
+    def error_sets(
+        self, effects: Sequence[Any], param_sets: Sequence[Sequence[FloatArray]], held: bool
     ) -> list[FloatArray]:
-        """:meth:`error` with ``new`` added at each of the parameter values ``xs``."""
+        """:meth:`error` for each set of parameters of ``effects`` (one batched simulation
+        where the problem can: a fit's grid or Jacobian)."""
         ...
 
     def phases(self) -> dict[str, npt.NDArray[np.bool_]]:
@@ -214,15 +210,10 @@ class TorqueDrivenProblem:
         w = self.w_held if held else self.w_fit
         return (simulate(self.model, effects, params, w) - w.q).ravel()
 
-    def error_many(
-        self,
-        effects: Sequence[Effect],
-        params: Sequence[FloatArray],
-        new: Effect,
-        xs: Sequence[FloatArray],
-        held: bool,
+    def error_sets(
+        self, effects: Sequence[Effect], param_sets: Sequence[Sequence[FloatArray]], held: bool
     ) -> list[FloatArray]:
-        return [self.error([*effects, new], [*params, x], held) for x in xs]
+        return [self.error(effects, params, held) for params in param_sets]
 
     def phases(self) -> dict[str, npt.NDArray[np.bool_]]:
         return {
@@ -366,21 +357,12 @@ class Discoverer:
             return x0, None
 
         def many(xs: Sequence[FloatArray]) -> list[FloatArray]:
-            # one batched simulation where the problem offers it (drop tests)
-            return list(problem.error_many(effects, params, new, xs, False))
+            return problem.error_sets([*effects, new], [[*params, x] for x in xs], False)
 
         def residual(x: FloatArray) -> FloatArray:
             return many([x])[0]
 
         lower, upper = np.asarray(new.lower, dtype=float), np.asarray(new.upper, dtype=float)
-
-        def jacobian(x: FloatArray) -> FloatArray:
-            # forward differences of step 1e-3 max(1, |x|), backwards at the upper bound
-            h = 1e-3 * np.maximum(1.0, np.abs(x))
-            h = np.where(x + h > upper, -h, h)
-            shifted = [x + np.eye(x.size)[i] * h[i] for i in range(x.size)]
-            base, *moved = many([x, *shifted])
-            return np.stack([(m - base) / h[i] for i, m in enumerate(moved)], axis=1)
 
         if x0.size == 1:
             # one parameter: scan its range first. Effects with a threshold (stiction,
@@ -389,7 +371,12 @@ class Discoverer:
             costs = [float(np.sum(r**2)) for r in many([np.array([g]) for g in grid])]
             x0 = np.array([grid[int(np.argmin(costs))]])
         result = least_squares(
-            residual, x0, jac=jacobian, bounds=(lower, upper), x_scale="jac", max_nfev=60
+            residual,
+            x0,
+            jac=lambda x: _jacobian(many, x, upper),
+            bounds=(lower, upper),
+            x_scale="jac",
+            max_nfev=60,
         )
         if float(np.sum(result.fun**2)) > float(np.sum(residual(x0) ** 2)):
             result.x = x0  # the local refinement did not help: keep the scanned value
@@ -526,11 +513,19 @@ class Discoverer:
                 k += n
             return out
 
+        def many(xs: Sequence[FloatArray]) -> list[FloatArray]:
+            return self.problem.error_sets(effects, [unpack(x) for x in xs], False)
+
         def residual(x: FloatArray) -> FloatArray:
-            return self.problem.error(effects, unpack(x), False)
+            return many([x])[0]
 
         result = least_squares(
-            residual, x0, bounds=(lower, upper), x_scale="jac", max_nfev=40, diff_step=1e-3
+            residual,
+            x0,
+            jac=lambda x: _jacobian(many, x, upper),
+            bounds=(lower, upper),
+            x_scale="jac",
+            max_nfev=40,
         )
         if float(np.sum(result.fun**2)) >= float(np.sum(residual(x0) ** 2)):
             return list(params), None
@@ -599,6 +594,18 @@ class Discoverer:
                     )
                 out.append(entry)
         return out
+
+
+def _jacobian(
+    many: Callable[[Sequence[FloatArray]], list[FloatArray]], x: FloatArray, upper: FloatArray
+) -> FloatArray:
+    """Forward differences of step 1e-3 max(1, |x|) (backwards at the upper bound), the
+    shifted points evaluated together with ``x`` in one call of ``many``."""
+    h = 1e-3 * np.maximum(1.0, np.abs(x))
+    h = np.where(x + h > upper, -h, h)
+    shifted = [x + np.eye(x.size)[i] * h[i] for i in range(x.size)]
+    base, *moved = many([x, *shifted])
+    return np.stack([(m - base) / h[i] for i, m in enumerate(moved)], axis=1)
 
 
 def _size(effect: Any, x: FloatArray) -> int:

@@ -753,17 +753,15 @@ class DropProblem:
         s = self.held if held else self.fit
         return s.error(self.physics(effects, params, len(s.trials)))
 
-    def error_many(
+    def error_sets(
         self,
         effects: Sequence[DropEffect],
-        params: Sequence[FloatArray],
-        new: DropEffect,
-        xs: Sequence[FloatArray],
+        param_sets: Sequence[Sequence[FloatArray]],
         held: bool,
     ) -> list[FloatArray]:
         s = self.held if held else self.fit
         n = len(s.trials)
-        return s.error_many([self.physics([*effects, new], [*params, x], n) for x in xs])
+        return s.error_many([self.physics(effects, params, n) for params in param_sets])
 
     def phases(self) -> dict[str, BoolArray]:
         masks: dict[str, list[BoolArray]] = {name: [] for name in PHASES}
