@@ -88,3 +88,12 @@ def test_existing_bags_and_unwritable_directories_are_refused(tmp_path: Path) ->
         locked.chmod(0o700)
     with pytest.raises(BagWriteError, match="MB free"):
         check_writable(tmp_path, min_free_bytes=1 << 62)
+
+
+def test_a_finished_bag_names_its_file_after_itself(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / "trial", {"k": "v"}) as bag:
+        bag.add("/x", "std_msgs/msg/String")
+    assert sorted(p.name for p in (tmp_path / "trial").iterdir()) == ["metadata.yaml", "trial.mcap"]
+    assert "partial" not in (tmp_path / "trial" / "metadata.yaml").read_text()
+    with open_bag(tmp_path / "trial") as opened:
+        assert opened.custom_data["k"] == "v"

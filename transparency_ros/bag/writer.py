@@ -98,6 +98,7 @@ class BagWriter:
         # normal end, or Ctrl-C: keep every message written up to here in a bag that opens
         try:
             self._writer.close()
+            _name_files_after(self.partial, self.path.name)
             self.partial.rename(self.path)
         except (WriterError, OSError) as err:
             shutil.rmtree(self.partial, ignore_errors=True)
@@ -108,6 +109,17 @@ class BagWriter:
         with contextlib.suppress(WriterError, OSError, AttributeError):
             self._writer.close()
         shutil.rmtree(self.partial, ignore_errors=True)
+
+
+def _name_files_after(directory: Path, name: str) -> None:
+    """rosbags names the storage file after the directory it writes into, here the temporary
+    ``<name>.partial``: give the file the bag's own name, in the metadata too, so a finished
+    bag does not look unfinished."""
+    old = f"{directory.name}.mcap"
+    new = f"{name}.mcap"
+    (directory / old).rename(directory / new)
+    metadata = directory / "metadata.yaml"
+    metadata.write_text(metadata.read_text().replace(old, new))
 
 
 def message_types() -> Any:
