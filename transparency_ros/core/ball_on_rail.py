@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from transparency_ros.core.contact_model import restitution_damping_ratio
 from transparency_ros.core.errors import ModelError
 
 GRAVITY = 9.81
@@ -58,8 +59,7 @@ class Ball:
     @property
     def damping_ratio(self) -> float:
         """Contact damping ratio giving restitution e against an immovable arm."""
-        log_e = math.log(self.restitution)
-        return -log_e / math.sqrt(math.pi**2 + log_e**2)
+        return float(restitution_damping_ratio(self.restitution))
 
     @property
     def contact_damping_ns_per_m(self) -> float:

@@ -36,7 +36,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import Enum
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -334,3 +334,10 @@ def model_for(
     return ContactModel.from_config(
         get_actuator(actuator, actuators_path), load_drop_test(drop_test_path), **overrides
     )
+
+
+def restitution_damping_ratio(restitution: Any) -> Any:
+    """Damping ratio of a spring-damper contact that rebounds with ``restitution`` from an
+    immovable body: zeta = -ln e / sqrt(pi^2 + ln^2 e) (floats or numpy arrays)."""
+    log_e = np.log(restitution)
+    return -log_e / np.sqrt(np.pi**2 + log_e**2)

@@ -23,6 +23,7 @@ import math
 import random
 from dataclasses import dataclass, field
 
+from transparency_ros.core.contact_model import restitution_damping_ratio
 from transparency_ros.core.errors import ModelError
 
 GRAVITY = 9.81
@@ -66,8 +67,7 @@ class RigParams:
     @property
     def contact_damping_ns_per_m(self) -> float:
         """Damping of a spring-damper contact with this restitution against a fixed wall."""
-        e = self.restitution
-        zeta = -math.log(e) / math.sqrt(math.pi**2 + math.log(e) ** 2)
+        zeta = float(restitution_damping_ratio(self.restitution))
         return 2.0 * zeta * math.sqrt(self.contact_stiffness_n_per_m * self.shuttle_mass_kg)
 
 

@@ -26,6 +26,7 @@ import numpy as np
 
 from transparency_ros.core.actuator_physics import ActuatorPhysics, ImpedanceLaw, PhysicsParams
 from transparency_ros.core.config import get_actuator, load_drop_test
+from transparency_ros.core.contact_model import restitution_damping_ratio
 from transparency_ros.synth.campaign import draw_hidden
 
 GRAVITY = 9.81
@@ -84,8 +85,7 @@ class Shuttle:
 
     @property
     def damping_ns_per_m(self) -> float:
-        e = min(max(self.restitution, 1e-3), 0.999)
-        zeta = -math.log(e) / math.sqrt(math.pi**2 + math.log(e) ** 2)
+        zeta = float(restitution_damping_ratio(min(max(self.restitution, 1e-3), 0.999)))
         return 2 * zeta * math.sqrt(self.stiffness_n_per_m * self.mass_kg)
 
     @property

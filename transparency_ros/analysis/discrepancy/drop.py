@@ -44,6 +44,7 @@ from transparency_ros.analysis.discrepancy.discover import (
 from transparency_ros.analysis.discrepancy.effects import drifted, pinned
 from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray, read_spec
 from transparency_ros.core.config import finite_number, get_actuator, load_drop_test
+from transparency_ros.core.contact_model import restitution_damping_ratio
 from transparency_ros.core.errors import ConfigError, ModelError
 
 BoolArray = npt.NDArray[np.bool_]
@@ -305,8 +306,7 @@ class DropSimulator:
         engaged = rigid.copy()
         any_backlash = not rigid.all()
         if spring:
-            log_e = np.log(np.clip(ph.restitution, 1e-3, 0.999))
-            zeta = -log_e / np.sqrt(math.pi**2 + log_e**2)
+            zeta = restitution_damping_ratio(np.clip(ph.restitution, 1e-3, 0.999))
             damping = 2 * zeta * np.sqrt(ph.stiffness_n_per_m * m)
         weight = ph.weight_torque_nm
         step = np.asarray(ph.encoder_step_rad, dtype=float)
