@@ -1,0 +1,274 @@
+"""The drop-test integrator of the discrepancy tool, compiled (numba).
+
+One row is one trial under one physics: the fits simulate every trial for every candidate
+value at once, hundreds of rows per call and hundreds of calls per analysis. A row is a scalar
+state (motor, arm, shuttle) stepped with plain branches; numba compiles the loop (cached on
+disk after the first run), which is what makes a fixed small step affordable for every row.
+
+The physics (see :mod:`transparency_ros.analysis.discrepancy.drop` for which effect changes
+which value):
+
+* motor and arm are one body under the impedance k_s (theta_d - theta_sensed), the offset,
+  viscous drag integrated exactly over the step and Karnopp stick-slip friction with any
+  reversal located within the step; with backlash they part whenever the motor would have to
+  pull the arm, and rejoin (momentum kept) when the gap closes;
+* the shuttle falls under gravity and rail friction; a collision is located within the step,
+  momentum is exchanged there with restitution e (a rebound slower than 5 cm/s ends the
+  bouncing: the shuttle stays on the arm), and the rest of the step is integrated from the new
+  velocities; up to four collisions per step;
+* with a finite contact stiffness the contact is a spring-damper instead (damped for e);
+* the shuttle's weight loads the arm while they touch; the controller sees the encoder's lattice.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
+
+import numba
+import numpy as np
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+GRAVITY = 9.81
+GLUE_SPEED_M_S = 0.05  # a bounce slower than this ends the bouncing
+MAX_STRIKES = 4  # collisions located within one step
+
+
+def jit(f: F) -> F:
+    """Compiled on first use, cached on disk."""
+    return cast(F, numba.njit(cache=True, nogil=True)(f))
+
+
+# columns of the physics matrix of :func:`impact`, one row per simulated trial
+COLUMNS = (
+    "mass",  # shuttle [kg]
+    "arm",  # arm length r [m]
+    "k_s",
+    "theta_d",
+    "arm_inertia",
+    "q0",  # motor position at the start [rad]
+    "y0",  # shuttle height and velocity at the start
+    "v0",
+    "rotor",  # J_r
+    "viscous",
+    "coulomb",
+    "static",
+    "offset",
+    "weight",  # m_s g r while touching
+    "e",  # restitution
+    "stiffness",  # contact spring [N/m]; inf: instant collisions
+    "damping",  # contact damper [N s/m]
+    "rail",  # rail friction [N]
+    "backlash",
+    "encoder_step",
+    "substeps",  # integration steps per output step (a stiff contact spring needs several)
+)
+(
+    MASS,
+    ARM,
+    K_S,
+    THETA_D,
+    ARM_INERTIA,
+    Q0,
+    Y0,
+    V0,
+    ROTOR,
+    VISCOUS,
+    COULOMB,
+    STATIC,
+    OFFSET,
+    WEIGHT,
+    E,
+    STIFFNESS,
+    DAMPING,
+    RAIL,
+    BACKLASH,
+    ENCODER_STEP,
+    SUBSTEPS,
+) = range(len(COLUMNS))
+
+
+@jit
+def sign(x: float) -> float:
+    return 1.0 if x > 0.0 else -1.0 if x < 0.0 else 0.0
+
+
+@jit
+def drag_step(w: float, accel: float, rate: float, dt: float) -> tuple[float, float]:
+    """(velocity, displacement) after ``dt`` of w' = accel - rate w, exactly."""
+    x = rate * dt
+    if x < 1e-6:
+        phi1, phi2 = 1.0 - x / 2, 0.5 - x / 6
+    else:
+        decay = math.exp(-x)
+        phi1, phi2 = (1.0 - decay) / x, (x - 1.0 + decay) / (x * x)
+    return w * math.exp(-x) + accel * dt * phi1, (w * phi1 + accel * dt * phi2) * dt
+
+
+@jit
+def friction_step(
+    w: float,
+    inertia: float,
+    torque: float,
+    dt: float,
+    friction: tuple[float, float, float],
+) -> tuple[float, float]:
+    """(new velocity, mean velocity over the step) of a body under ``torque`` with viscous drag
+    and Karnopp stick-slip friction (``friction``: b_v, tau_coul, breakaway torque). A reversal
+    within the step is located: the body stops there and, if the torque breaks the static
+    friction, moves the other way for the rest of it."""
+    viscous, coulomb, static = friction
+    if w == 0.0 and abs(torque) <= static:
+        return 0.0, 0.0
+    rate = viscous / inertia
+    direction = sign(torque) if w == 0.0 else sign(w)
+    new, moved = drag_step(w, (torque - coulomb * direction) / inertia, rate, dt)
+    if w != 0.0 and new * w < 0.0:
+        t0 = dt * w / (w - new)  # the (linear) zero crossing
+        moved = 0.5 * w * t0
+        new = 0.0
+        if abs(torque) > static:
+            back = (torque - coulomb * sign(torque)) / inertia
+            new, more = drag_step(0.0, back, rate, max(dt - t0, 0.0))
+            moved += more
+    return new, (moved / dt if dt > 0.0 else w)
+
+
+@jit
+def sense(q: float, step: float) -> float:
+    """The position the controller sees: on the encoder's lattice."""
+    return round(q / step) * step if step > 0.0 else q
+
+
+# the state of one row, stepped in place: motor and arm (load side) angle and speed, shuttle
+# height and speed, whether the shuttle rides on the arm and whether the gearbox is engaged
+QM, WM, QL, WL, Y, V, GLUED, ENGAGED = range(8)
+
+
+@jit
+def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
+    """Fill ``out_q`` (motor position) and ``out_y`` (shuttle height), (rows, steps), for the
+    physics ``p`` (rows, COLUMNS)."""
+    s = np.empty(8)
+    for i in range(out_q.shape[0]):
+        row = p[i]
+        # with backlash the arm starts anywhere in the dead band: free until the gap closes
+        rigid = 1.0 if row[BACKLASH] == 0.0 else 0.0
+        s[:] = (row[Q0], 0.0, row[Q0], 0.0, row[Y0], row[V0], 0.0, rigid)
+        spring = math.isfinite(row[STIFFNESS])
+        n_sub = int(row[SUBSTEPS])
+        h = dt / n_sub
+        for k in range(steps):
+            out_q[i, k], out_y[i, k] = s[QM], s[Y]
+            for _ in range(n_sub):
+                drive, load, acc_y = forces(row, s, h)
+                joint_step(row, s, drive, load, h)
+                # the shuttle
+                if s[GLUED]:
+                    s[Y] = row[ARM] * math.sin(s[QL])
+                    s[V] = row[ARM] * math.cos(s[QL]) * s[WL]
+                    continue
+                s[Y] += (s[V] + 0.5 * acc_y * h) * h  # exact for the step's acceleration
+                s[V] += acc_y * h
+                if not spring:
+                    strikes(row, s, acc_y, h)
+
+
+@jit
+def forces(row: Any, s: Any, dt: float) -> tuple[float, float, float]:
+    """(motor drive, load on the arm, shuttle acceleration) at the step's start."""
+    m, r, weight = row[MASS], row[ARM], row[WEIGHT]
+    cos = math.cos(s[QL])
+    # the impedance at the step's midpoint (predicted): held at the step's start it would lag
+    # by half a step, a steady error in the swing
+    drive = (
+        row[K_S] * (row[THETA_D] - sense(s[QM], row[ENCODER_STEP]) - 0.5 * s[WM] * dt) + row[OFFSET]
+    )
+    load, acc_y = 0.0, -GRAVITY
+    if math.isfinite(row[STIFFNESS]):
+        pen = r * math.sin(s[QL]) - s[Y]
+        if pen > 0.0:
+            force = max(0.0, row[STIFFNESS] * pen + row[DAMPING] * (r * cos * s[WL] - s[V]))
+            load = -force * r * cos - weight * cos
+            acc_y = force / m - weight / (m * r)
+    elif s[GLUED]:
+        load = -weight * cos
+    # rail friction against the shuttle's motion; a glued shuttle passes it to the arm
+    rail = row[RAIL] * sign(s[V])
+    if s[GLUED]:
+        load -= rail * r * cos
+    return drive, load, acc_y - rail / m
+
+
+@jit
+def joint_step(row: Any, s: Any, drive: float, load: float, dt: float) -> None:
+    """Motor and arm over one step: one body while the motor pushes the arm; with backlash
+    each on its own once it would pull, until the gap closes again (momentum kept)."""
+    fr = (row[VISCOUS], row[COULOMB], row[STATIC])
+    j_r = row[ROTOR]
+    j_load = row[ARM_INERTIA] + (row[MASS] * row[ARM] ** 2 if s[GLUED] else 0.0)  # m_s r^2
+    w_joint, mean_joint = friction_step(s[WM], j_r + j_load, drive + load, dt, fr)
+    half = row[BACKLASH] / 2
+    pull = j_load * (w_joint - s[WM]) / dt - load  # what the motor would exert on the arm
+    if half == 0.0 or (s[ENGAGED] and sign(s[QL] - s[QM]) * pull <= 0.0):
+        s[WM] = s[WL] = w_joint
+        s[QM] += mean_joint * dt
+        s[QL] = s[QM] if half == 0.0 else s[QL] + mean_joint * dt
+        return
+    s[ENGAGED] = 0.0
+    w_motor, mean_motor = friction_step(s[WM], j_r, drive, dt, fr)
+    w_arm = s[WL] + load / j_load * dt
+    s[QM] += mean_motor * dt
+    s[QL] += 0.5 * (s[WL] + w_arm) * dt
+    s[WM], s[WL] = w_motor, w_arm
+    gap = s[QL] - s[QM]
+    if abs(gap) >= half:
+        side = sign(gap)
+        s[QL] = s[QM] + side * half
+        if (w_arm - w_motor) * side >= 0.0:  # closing: they rejoin
+            s[WM] = s[WL] = (j_r * w_motor + j_load * w_arm) / (j_r + j_load)
+            s[ENGAGED] = 1.0
+
+
+@jit
+def strikes(row: Any, s: Any, acc_y: float, dt: float) -> None:
+    """Collisions of the free shuttle with the arm within the step just taken. Each is located:
+    the state goes back to it, momentum is exchanged there (restitution e; a rebound slower than
+    GLUE_SPEED_M_S: the shuttle stays on the arm), and the rest of the step is integrated from
+    the new velocities (gravity and a geared actuator's drag change the speeds within a step by
+    more than the model may miss). A bounce may strike again in the same step."""
+    m, r, e = row[MASS], row[ARM], row[E]
+    j_a, j_r = row[ARM_INERTIA], row[ROTOR]
+    window = dt
+    for _ in range(MAX_STRIKES):
+        cos = math.cos(s[QL])
+        tip_y, tip_v = r * math.sin(s[QL]), r * cos * s[WL]
+        if s[GLUED] or s[Y] > tip_y or s[V] - tip_v >= 0.0:
+            return
+        # they met tau before the end of the step, no earlier than the strike before
+        tau = min(max((tip_y - s[Y]) / max(tip_v - s[V], 1e-9), 0.0), window)
+        v_c = s[V] - acc_y * tau  # the shuttle's speed when they met
+        big_m = (j_a + (j_r if s[ENGAGED] else 0.0)) / (r * cos) ** 2  # struck mass at the tip
+        u = v_c - tip_v
+        glued = abs(u) * e < GLUE_SPEED_M_S
+        ee = 0.0 if glued else e
+        v_new = v_c - (1 + ee) * big_m / (m + big_m) * u
+        w_new = (tip_v + (1 + ee) * m / (m + big_m) * u) / (r * cos)
+        ql_c, qm_c = s[QL] - s[WL] * tau, s[QM] - s[WM] * tau
+        j_after = j_a + (m * r * r if glued else 0.0)
+        load_after = -row[WEIGHT] * math.cos(ql_c) if glued else 0.0
+        if s[ENGAGED]:
+            drive = row[K_S] * (row[THETA_D] - sense(qm_c, row[ENCODER_STEP])) + row[OFFSET]
+            fr = (row[VISCOUS], row[COULOMB], row[STATIC])
+            w_end, mean = friction_step(w_new, j_after + j_r, drive + load_after, tau, fr)
+            s[QM], s[WM] = qm_c + mean * tau, w_end
+        else:
+            w_end = w_new + load_after / j_after * tau
+            mean = 0.5 * (w_new + w_end)
+        s[Y] = r * math.sin(ql_c) + (v_new + 0.5 * acc_y * tau) * tau
+        s[V] = r * math.cos(ql_c) * w_end if glued else v_new + acc_y * tau
+        s[QL], s[WL] = ql_c + mean * tau, w_end
+        s[GLUED] = 1.0 if glued else 0.0
+        window = tau
