@@ -48,6 +48,7 @@ from transparency_ros.core.errors import ModelError
 GRID_POINTS = 25
 STATE_EXPLAINED = 0.3  # below: the leftover torque is not a function of the state
 SIGNIFICANT = 1.5  # a held-out error within 1.5x the noise floor has nothing left to explain
+LEFTOVER = 3.0  # a phase whose residual is above 3x the noise floor is left unexplained
 PHASES = ("stuck", "reversal", "slow", "fast")
 
 
@@ -325,6 +326,41 @@ def spectrum_peak(signal: FloatArray, fs: float, above_hz: float = 0.5) -> tuple
     return float(f[keep][i]), float(power[keep][i])
 
 
+@dataclass
+class _Base:
+    """The held-out error a round starts from."""
+
+    err: FloatArray
+    rmse: float
+    aic: float
+    floor: float  # the noise floor
+
+
+@dataclass
+class _Step:
+    """One or two candidate effects added to those found so far, with all parameters."""
+
+    added: list[Any]
+    params: list[FloatArray]  # of the effects found so far, then of ``added``
+    err: FloatArray  # held-out
+    rmse: float
+    aic: float
+    gain: float  # share of the held-out error above the noise floor it removes
+    result: Any  # the least-squares fit behind the parameters
+    meaningful: bool
+    joint: bool = False  # ``result`` fitted every parameter, not only those of ``added``
+    alone_rmse: list[float] = field(default_factory=list)  # a pair: the first member alone
+    alone_aic: list[float] = field(default_factory=list)  # a pair: each member alone
+    alternatives: list[str] = field(default_factory=list)
+
+    def new(self) -> list[tuple[Any, FloatArray]]:
+        return list(zip(self.added, self.params[len(self.params) - len(self.added) :], strict=True))
+
+
+def _total(params: Sequence[FloatArray]) -> int:
+    return sum(p.size for p in params)
+
+
 class Discoverer:
     def __init__(
         self,
@@ -367,9 +403,13 @@ class Discoverer:
         if x0.size == 1:
             # one parameter: scan its range first. Effects with a threshold (stiction,
             # saturation) change the error in steps, where finite-difference gradients are zero.
+            # Then once more between the best point's neighbours, for a threshold's value.
             grid = np.unique(np.r_[np.linspace(lower[0], upper[0], GRID_POINTS), x0])
-            costs = [float(np.sum(r**2)) for r in many([np.array([g]) for g in grid])]
-            x0 = np.array([grid[int(np.argmin(costs))]])
+            for _ in range(2):
+                costs = [float(np.sum(r**2)) for r in many([np.array([g]) for g in grid])]
+                best = int(np.argmin(costs))
+                x0 = np.array([grid[best]])
+                grid = np.linspace(grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)], 25)
         result = least_squares(
             residual,
             x0,
@@ -425,72 +465,168 @@ class Discoverer:
         report.heldout_rmse_nominal = self._rmse(held_err)
         remaining = problem.candidates()
         floor = problem.noise_floor()
+        closest: _Step | None = None
         while remaining and self._rmse(held_err) > SIGNIFICANT * floor:
-            passing: list[tuple[float, Any, FloatArray, Any, FloatArray, float]] = []
-            base_rmse, base_aic = (
-                self._rmse(held_err),
-                self._aic(held_err, sum(p.size for p in params)),
-            )
-            for cand in remaining:
-                self.progress(f"trying {cand.name}")
-                x, result = self._fit(effects, params, cand)
-                err = problem.error([*effects, cand], [*params, x], True)
-                rmse = self._rmse(err)
-                aic = self._aic(err, sum(p.size for p in params) + _size(cand, x))
-                # the part of the error above the noise floor that this effect removes
-                excess = max(base_rmse - floor, 1e-12)
-                gain = (base_rmse - rmse) / excess
-                if base_rmse - rmse < 0.1 * floor:
-                    continue
-                if not cand.meaningful(x):
-                    continue  # e.g. drift scales close to 1: no wrong parameter to name
-                if gain >= self.min_improvement and aic < base_aic - 10:
-                    passing.append((rmse, cand, x, result, err, aic))
-            if not passing:
+            base = _Base(held_err, self._rmse(held_err), self._aic(held_err, _total(params)), floor)
+            singles = [self._single(effects, params, cand, base) for cand in remaining]
+            step = self._choose([s for s in singles if self._names(s, base)])
+            if step is None and base.rmse > LEFTOVER * floor:
+                # structure is left that no single effect explains: two missing effects may
+                # each explain too little alone (one stands in for the other). Not below: a
+                # pair fitted to what is nearly noise explains noise.
+                self.progress("no single effect explains it: trying pairs")
+                step = self._choose(
+                    [s for s in self._pairs(effects, params, singles, base) if self._names(s, base)]
+                )
+            if step is None:
+                closest = max(singles, key=lambda s: s.gain, default=None)
                 break
-            # effects that explain the held-out data alike (within 5 % RMSE) cannot be told apart
-            # here: name the one with the fewest parameters, list the others as alternatives
-            top = min(passing, key=lambda c: c[5])
-            alike = [c for c in passing if c[0] <= 1.05 * top[0]]
-            rmse, cand, x, result, err, _ = min(alike, key=lambda c: (_size(c[1], c[2]), c[5]))
-            alternatives = [c[1].name for c in alike if c[1] is not cand]
-            ci = self._interval(result, x)
-            finding = Finding(
-                effect=cand.name,
-                parameters={n: float(v) for n, v in zip(cand.param_names, x, strict=True)}
-                | cand.extra_parameters(x),
-                confidence_interval={n: c for n, c in zip(cand.param_names, ci, strict=True)},
-                where=self._where(held_err, err),
-                evidence=(
-                    f"held-out simulation RMSE {self._rmse(held_err):.4g} -> {rmse:.4g} rad "
-                    f"({100 * (1 - rmse / self._rmse(held_err)):.0f} % lower) with "
-                    f"{x.size} parameter(s)"
-                    + (f"; explained alike by {', '.join(alternatives)}" if alternatives else "")
-                ),
-                heldout_rmse_before=self._rmse(held_err),
-                heldout_rmse_after=rmse,
-                alternatives=alternatives,
-            )
-            report.findings.append(finding)
-            self.progress(f"found {cand.name}: {finding.evidence}")
-            effects.append(cand)
-            params.append(x)
-            held_err = err
-            remaining = [c for c in remaining if c is not cand]
-            # the effects found so far, refitted together: an effect found first may have
-            # stood in for part of one found later
-            refit, joint = self._refit(effects, params)
-            if joint is not None:
-                refit_err = problem.error(effects, refit, True)
-                if self._rmse(refit_err) < self._rmse(held_err):
-                    params, held_err = refit, refit_err
-                    intervals = self._interval(joint, joint.x)
-                    self._update_findings(report, effects, params, intervals)
+            first_rmse = base.rmse
+            for k, cand in enumerate(step.added):
+                # a pair: the first is reported with what it removes alone
+                after = step.rmse if k == len(step.added) - 1 else step.alone_rmse[k]
+                report.findings.append(self._finding(cand, step, base, first_rmse, after))
+                first_rmse = after
+                self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
+            effects = [*effects, *step.added]
+            params, held_err = step.params, step.err
+            remaining = [c for c in remaining if all(c is not a for a in step.added)]
+            if step.joint:  # every parameter refitted: the findings' values and intervals
+                intervals = self._interval(step.result, step.result.x)
+                self._update_findings(report, effects, params, intervals)
         report.fitted = list(zip(effects, params, strict=True))
         report.final_heldout_rmse = self._rmse(held_err)
-        report.unexplained = self._leftover(held_err, effects, params)
+        report.unexplained = self._leftover(held_err, effects, params, closest)
         report.seconds = time.perf_counter() - started
         return report
+
+    def _single(
+        self, effects: list[Any], params: list[FloatArray], cand: Any, base: _Base
+    ) -> _Step:
+        """``cand`` added to the effects found so far: its own parameters fitted, then all of
+        them together (an effect found earlier may have stood in for part of this one)."""
+        self.progress(f"trying {cand.name}")
+        x, result = self._fit(effects, params, cand)
+        joint, together = self._refit([*effects, cand], [*params, x])
+        if together is None:
+            return self._step(effects, [*params, x], [cand], result, base)
+        step = self._step(effects, joint, [cand], together, base)
+        step.joint = True
+        return step
+
+    def _step(
+        self,
+        effects: list[Any],
+        params: list[FloatArray],
+        added: list[Any],
+        result: Any,
+        base: _Base,
+    ) -> _Step:
+        err = self.problem.error([*effects, *added], params, True)
+        rmse = self._rmse(err)
+        size = _total(params[: len(effects)]) + sum(
+            _size(a, p) for a, p in zip(added, params[len(effects) :], strict=True)
+        )
+        return _Step(
+            added=added,
+            params=params,
+            err=err,
+            rmse=rmse,
+            aic=self._aic(err, size),
+            gain=(base.rmse - rmse) / max(base.rmse - base.floor, 1e-12),
+            result=result,
+            meaningful=all(
+                a.meaningful(p) for a, p in zip(added, params[len(effects) :], strict=True)
+            ),
+        )
+
+    def _names(self, step: _Step, base: _Base) -> bool:
+        """Whether ``step`` names its effects: it removes at least ``min_improvement`` of the
+        held-out error above the noise floor, a tenth of the floor at least, improves the
+        information criterion by 10, and every effect in it is meaningful (no drift scales near
+        1, no fit against a bound); a pair also beats each of its members alone by 10. A missing
+        effect that is really there explains most of what is left; one that stands in for
+        something else explains part of it."""
+        return (
+            step.meaningful
+            and base.rmse - step.rmse >= 0.1 * base.floor
+            and step.gain >= self.min_improvement
+            and step.aic < base.aic - 10
+            and all(step.aic < a - 10 for a in step.alone_aic)
+        )
+
+    @staticmethod
+    def _choose(steps: list[_Step]) -> _Step | None:
+        """The best step by the information criterion. Steps that explain the held-out data
+        alike (within 5 % RMSE) cannot be told apart here: the one with the fewest parameters
+        is named, the others are listed as alternatives."""
+        if not steps:
+            return None
+        top = min(steps, key=lambda c: c.aic)
+        alike = [c for c in steps if c.rmse <= 1.05 * top.rmse]
+        best = min(alike, key=lambda c: (sum(_size(a, p) for a, p in c.new()), c.aic))
+        best.alternatives = ["+".join(a.name for a in c.added) for c in alike if c is not best]
+        return best
+
+    def _pairs(
+        self,
+        effects: list[Any],
+        params: list[FloatArray],
+        singles: list[_Step],
+        base: _Base,
+    ) -> list[_Step]:
+        """Every two remaining candidates added together, all parameters fitted jointly from
+        each one's own fit: two effects that are both missing may each explain too little alone
+        (one stands in for the other)."""
+        out = []
+        ranked = sorted(singles, key=lambda c: c.rmse)  # a pair lists the better one first
+        for i, first in enumerate(ranked):
+            for second in ranked[i + 1 :]:
+                added = [*first.added, *second.added]
+                self.progress(f"trying {' + '.join(c.name for c in added)}")
+                x0 = [*params, *(x for _, x in first.new()), *(x for _, x in second.new())]
+                joint, result = self._refit([*effects, *added], x0)
+                if result is None:
+                    continue
+                step = self._step(effects, joint, added, result, base)
+                step.joint = True
+                step.alone_rmse = [first.rmse]
+                step.alone_aic = [first.aic, second.aic]
+                out.append(step)
+        return out
+
+    def _finding(self, cand: Any, step: _Step, base: _Base, before: float, after: float) -> Finding:
+        x = step.params[len(step.params) - len(step.added) + step.added.index(cand)]
+        ci = (
+            self._interval(step.result, x)
+            if not step.joint
+            else [(float(v), float(v)) for v in x]  # set from the joint fit afterwards
+        )
+        together = [a.name for a in step.added if a is not cand]
+        return Finding(
+            effect=cand.name,
+            parameters={n: float(v) for n, v in zip(cand.param_names, x, strict=True)}
+            | cand.extra_parameters(x),
+            confidence_interval={n: c for n, c in zip(cand.param_names, ci, strict=True)},
+            where=self._where(base.err, step.err),
+            evidence=(
+                f"held-out simulation RMSE {before:.4g} -> {after:.4g} rad "
+                f"({100 * (1 - after / before):.0f} % lower) with {x.size} parameter(s)"
+                + (
+                    f"; found together with {', '.join(together)} (neither explains it alone)"
+                    if together
+                    else ""
+                )
+                + (
+                    f"; explained alike by {', '.join(step.alternatives)}"
+                    if step.alternatives
+                    else ""
+                )
+            ),
+            heldout_rmse_before=before,
+            heldout_rmse_after=after,
+            alternatives=list(step.alternatives),
+        )
 
     def _refit(
         self, effects: Sequence[Any], params: Sequence[FloatArray]
@@ -554,10 +690,15 @@ class Discoverer:
             )
 
     def _leftover(
-        self, err: FloatArray, effects: Sequence[Any] = (), params: Sequence[FloatArray] = ()
+        self,
+        err: FloatArray,
+        effects: Sequence[Any] = (),
+        params: Sequence[FloatArray] = (),
+        closest: _Step | None = None,
     ) -> list[dict[str, Any]]:
         """Structure the found effects do not explain: a phase whose residual is well above the
-        noise floor, with the frequency where the residual has most power."""
+        noise floor, with the frequency where the residual has most power, and the candidate
+        that came closest (and how much it would have removed)."""
         floor = self.problem.noise_floor()
         out = []
         peak: float | None = None
@@ -566,7 +707,7 @@ class Discoverer:
             if mask.sum() < 50:
                 continue
             rms = float(np.sqrt(np.mean(err[mask] ** 2)))
-            if rms > 3 * floor:
+            if rms > LEFTOVER * floor:
                 if peak is None:
                     peak = self.problem.residual_peak_hz(effects, params)
                     explained = getattr(self.problem, "state_explained", lambda *_: None)(
@@ -580,6 +721,13 @@ class Discoverer:
                     "looks_like": f"residual {rms / floor:.0f}x the noise floor in phase "
                     f"'{name}'; the residual peaks near {peak:.1f} Hz",
                 }
+                if closest is not None and closest.gain > 0:
+                    names = " + ".join(c.name for c in closest.added)
+                    entry["closest_candidate"] = {"effect": names, "share_removed": closest.gain}
+                    entry["looks_like"] += (
+                        f"; the closest candidate, {names}, would remove {closest.gain:.0%} of "
+                        "it, too little to name"
+                    )
                 if explained is not None:
                     entry["state_explained_fraction"] = explained
                     entry["looks_like"] += (

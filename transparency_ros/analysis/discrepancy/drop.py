@@ -564,7 +564,10 @@ class DropProblem:
         self.fit = _Set(self.fit_trials)
         self.held = _Set(self.held_trials)
         self.model = nominal
-        self.min_improvement = 0.5
+        # concealed drop-test effects remove >= 80 % of the held-out error above the floor in the
+        # survey's campaigns; restitution or an offset standing in for friction that varies with
+        # position (outside the library) 50-65 %
+        self.min_improvement = 0.75
         mass = float(np.mean([t.mass_kg for t in trials]))
         self._candidates = list(candidates) if candidates is not None else drop_library(mass)
         self.nominal = {

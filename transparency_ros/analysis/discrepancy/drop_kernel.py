@@ -164,6 +164,7 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
             out_q[i, k], out_y[i, k] = s[QM], s[Y]
             for _ in range(n_sub):
                 drive, load, acc_y = forces(row, s, h)
+                w_start = (s[WM], s[WL])
                 joint_step(row, s, drive, load, h)
                 # the shuttle
                 if s[GLUED]:
@@ -173,7 +174,9 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
                 s[Y] += (s[V] + 0.5 * acc_y * h) * h  # exact for the step's acceleration
                 s[V] += acc_y * h
                 if not spring:
-                    strikes(row, s, acc_y, h)
+                    # the motor's and the arm's mean acceleration over the step
+                    acc = ((s[WM] - w_start[0]) / h, (s[WL] - w_start[1]) / h)
+                    strikes(row, s, (acc_y, *acc), h)
 
 
 @jit
@@ -188,9 +191,10 @@ def forces(row: Any, s: Any, dt: float) -> tuple[float, float, float]:
     )
     load, acc_y = 0.0, -GRAVITY
     if math.isfinite(row[STIFFNESS]):
-        pen = r * math.sin(s[QL]) - s[Y]
+        closing = r * cos * s[WL] - s[V]
+        pen = r * math.sin(s[QL]) - s[Y] + 0.5 * dt * closing  # at the step's midpoint
         if pen > 0.0:
-            force = max(0.0, row[STIFFNESS] * pen + row[DAMPING] * (r * cos * s[WL] - s[V]))
+            force = max(0.0, row[STIFFNESS] * pen + row[DAMPING] * closing)
             load = -force * r * cos - weight * cos
             acc_y = force / m - weight / (m * r)
     elif s[GLUED]:
@@ -218,55 +222,77 @@ def joint_step(row: Any, s: Any, drive: float, load: float, dt: float) -> None:
         s[QL] = s[QM] if half == 0.0 else s[QL] + mean_joint * dt
         return
     s[ENGAGED] = 0.0
-    w_motor, mean_motor = friction_step(s[WM], j_r, drive, dt, fr)
-    w_arm = s[WL] + load / j_load * dt
+    qm0, ql0, wm0, wl0 = s[QM], s[QL], s[WM], s[WL]
+    w_motor, mean_motor = friction_step(wm0, j_r, drive, dt, fr)
+    w_arm = wl0 + load / j_load * dt
     s[QM] += mean_motor * dt
-    s[QL] += 0.5 * (s[WL] + w_arm) * dt
+    s[QL] += 0.5 * (wl0 + w_arm) * dt
     s[WM], s[WL] = w_motor, w_arm
     gap = s[QL] - s[QM]
-    if abs(gap) >= half:
-        side = sign(gap)
+    if abs(gap) < half:
+        return
+    # the gap closed within the step: located (linearly), the two rejoin there if they close
+    # on each other (momentum kept) and move as one for the rest of the step
+    side = sign(gap)
+    f = min(max((side * half - (ql0 - qm0)) / (gap - (ql0 - qm0)), 0.0), 1.0)
+    wm_hit, wl_hit = wm0 + (w_motor - wm0) * f, wl0 + (w_arm - wl0) * f
+    if (wl_hit - wm_hit) * side < 0.0:  # parting already: held at the end of the band
         s[QL] = s[QM] + side * half
-        if (w_arm - w_motor) * side >= 0.0:  # closing: they rejoin
-            s[WM] = s[WL] = (j_r * w_motor + j_load * w_arm) / (j_r + j_load)
-            s[ENGAGED] = 1.0
+        return
+    qm_hit, rest = qm0 + (s[QM] - qm0) * f, (1.0 - f) * dt
+    w = (j_r * wm_hit + j_load * wl_hit) / (j_r + j_load)
+    w_end, mean = friction_step(w, j_r + j_load, drive + load, rest, fr)
+    s[QM] = qm_hit + mean * rest
+    s[QL] = s[QM] + side * half
+    s[WM] = s[WL] = w_end
+    s[ENGAGED] = 1.0
 
 
 @jit
-def strikes(row: Any, s: Any, acc_y: float, dt: float) -> None:
-    """Collisions of the free shuttle with the arm within the step just taken. Each is located:
-    the state goes back to it, momentum is exchanged there (restitution e; a rebound slower than
-    GLUE_SPEED_M_S: the shuttle stays on the arm), and the rest of the step is integrated from
-    the new velocities (gravity and a geared actuator's drag change the speeds within a step by
-    more than the model may miss). A bounce may strike again in the same step."""
+def strikes(row: Any, s: Any, acc: tuple[float, float, float], dt: float) -> None:
+    """Collisions of the free shuttle with the arm within the step just taken (``acc``: the
+    shuttle's, the motor's and the arm's acceleration over it). Each is located: the state goes
+    back to it (speeds too: the arm decelerates hard under the impedance, and its speed at the
+    end of the step would misstate the impact speed by a step's worth), momentum is exchanged
+    there (restitution e; a rebound slower than GLUE_SPEED_M_S: the shuttle stays on the arm),
+    and the rest of the step is integrated from the new velocities. A bounce may strike again
+    in the same step."""
     m, r, e = row[MASS], row[ARM], row[E]
     j_a, j_r = row[ARM_INERTIA], row[ROTOR]
+    acc_y, acc_m, acc_l = acc
     window = dt
     for _ in range(MAX_STRIKES):
-        cos = math.cos(s[QL])
-        tip_y, tip_v = r * math.sin(s[QL]), r * cos * s[WL]
+        tip_y, tip_v = r * math.sin(s[QL]), r * math.cos(s[QL]) * s[WL]
         if s[GLUED] or s[Y] > tip_y or s[V] - tip_v >= 0.0:
             return
         # they met tau before the end of the step, no earlier than the strike before
         tau = min(max((tip_y - s[Y]) / max(tip_v - s[V], 1e-9), 0.0), window)
         v_c = s[V] - acc_y * tau  # the shuttle's speed when they met
+        wl_c, wm_c = s[WL] - acc_l * tau, s[WM] - acc_m * tau
+        ql_c = s[QL] - (s[WL] - 0.5 * acc_l * tau) * tau
+        qm_c = s[QM] - (s[WM] - 0.5 * acc_m * tau) * tau
+        cos = math.cos(ql_c)
         big_m = (j_a + (j_r if s[ENGAGED] else 0.0)) / (r * cos) ** 2  # struck mass at the tip
-        u = v_c - tip_v
+        u = v_c - r * cos * wl_c
         glued = abs(u) * e < GLUE_SPEED_M_S
         ee = 0.0 if glued else e
         v_new = v_c - (1 + ee) * big_m / (m + big_m) * u
-        w_new = (tip_v + (1 + ee) * m / (m + big_m) * u) / (r * cos)
-        ql_c, qm_c = s[QL] - s[WL] * tau, s[QM] - s[WM] * tau
+        w_new = wl_c + (1 + ee) * m / (m + big_m) * u / (r * cos)
         j_after = j_a + (m * r * r if glued else 0.0)
-        load_after = -row[WEIGHT] * math.cos(ql_c) if glued else 0.0
+        load_after = -row[WEIGHT] * cos if glued else 0.0
         if s[ENGAGED]:
-            drive = row[K_S] * (row[THETA_D] - sense(qm_c, row[ENCODER_STEP])) + row[OFFSET]
+            drive = (
+                row[K_S] * (row[THETA_D] - sense(qm_c, row[ENCODER_STEP]) - 0.5 * wm_c * tau)
+                + row[OFFSET]
+            )
             fr = (row[VISCOUS], row[COULOMB], row[STATIC])
             w_end, mean = friction_step(w_new, j_after + j_r, drive + load_after, tau, fr)
             s[QM], s[WM] = qm_c + mean * tau, w_end
+            acc_m = (w_end - w_new) / tau if tau > 0.0 else acc_m
         else:
             w_end = w_new + load_after / j_after * tau
             mean = 0.5 * (w_new + w_end)
+        acc_l = (w_end - w_new) / tau if tau > 0.0 else acc_l
         s[Y] = r * math.sin(ql_c) + (v_new + 0.5 * acc_y * tau) * tau
         s[V] = r * math.cos(ql_c) * w_end if glued else v_new + acc_y * tau
         s[QL], s[WL] = ql_c + mean * tau, w_end
