@@ -1,7 +1,7 @@
 """Run the discrepancy tool blind on synthetic campaigns with concealed effects and score it,
 side by side with PySINDy on the same campaigns.
 
-    .venv/bin/python benchmarks/discrepancy_survey.py [--seeds 100:130] [--drop-seeds 200:220]
+    .venv/bin/python benchmarks/discrepancy_survey.py [--seeds 100:130] [--drop-seeds 200:230]
                                                       [--jobs 2] [--out DIR]
 
 Torque-driven campaigns (transparency_ros.synth.campaign): 10 trials x 6 s at 500 Hz of a

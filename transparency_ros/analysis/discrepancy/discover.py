@@ -479,7 +479,10 @@ class Discoverer:
                     [s for s in self._pairs(effects, params, singles, base) if self._names(s, base)]
                 )
             if step is None:
-                closest = max(singles, key=lambda s: s.gain, default=None)
+                # (a candidate refused as not meaningful, e.g. pinned at a bound, is no answer)
+                closest = max(
+                    (s for s in singles if s.meaningful), key=lambda s: s.gain, default=None
+                )
                 break
             first_rmse = base.rmse
             for k, cand in enumerate(step.added):

@@ -55,6 +55,7 @@ BoolArray = npt.NDArray[np.bool_]
 STEP_S = 1e-4
 SUBSTEPS = 4
 SPRING_SUBSTEPS = 10  # the contact's onset and end fall within a step
+OMEGA_STEP = 0.025  # radians of the contact spring's oscillation per step
 LEAD_S = 0.003  # the impact piece starts this long before the recorded contact
 AFTER_S = 0.25  # and lasts this long after it
 PHASES = ("before_contact", "impact", "deflection", "rebound", "reversal", "stuck")
@@ -294,16 +295,14 @@ class DropSimulator:
         stiffness = np.asarray(ph.stiffness_n_per_m, dtype=float)
         zeta = restitution_damping_ratio(np.clip(ph.restitution, 1e-3, 0.999))
         damping = np.where(np.isfinite(stiffness), 2 * zeta * np.sqrt(stiffness * m), 0.0)
-        # integrated in SUBSTEPS per output step; with a contact spring in SPRING_SUBSTEPS, or
-        # more where its period needs them (250 steps a period; the shuttle and the arm's tip
-        # on either side of the spring)
+        # integrated in SUBSTEPS per output step; while a contact spring is compressed in
+        # SPRING_SUBSTEPS, or more where its period needs them (250 steps a period; the shuttle
+        # and the arm's tip on either side of the spring)
         tip_mass = (np.tile(self.arm_inertia, tiles) + ph.rotor_inertia_kgm2) / np.tile(
             self.arm, tiles
         ) ** 2
         omega = np.sqrt(np.where(np.isfinite(stiffness), stiffness, 0.0) * (1 / m + 1 / tip_mass))
-        substeps = np.where(
-            omega > 0, np.maximum(SPRING_SUBSTEPS, np.ceil(omega * STEP_S / 0.025)), SUBSTEPS
-        )
+        contact_substeps = np.maximum(SPRING_SUBSTEPS, np.ceil(omega * STEP_S / OMEGA_STEP))
         columns = [
             m,
             *(np.tile(a, tiles) for a in (self.arm, self.k_s, self.theta_d, self.arm_inertia)),
@@ -320,7 +319,8 @@ class DropSimulator:
             ph.rail_friction_n,
             ph.backlash_rad,
             ph.encoder_step_rad,
-            substeps,
+            np.full(n, SUBSTEPS),
+            contact_substeps,
         ]
         out_q = np.empty((n, steps))
         out_y = np.empty((n, steps))

@@ -34,6 +34,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 GRAVITY = 9.81
 GLUE_SPEED_M_S = 0.05  # a bounce slower than this ends the bouncing
 MAX_STRIKES = 4  # collisions located within one step
+CONTACT_MARGIN_M = 1e-5  # a gap this small counts as contact to come (arm and shuttle accelerate)
 
 
 def jit(f: F) -> F:
@@ -63,7 +64,8 @@ COLUMNS = (
     "rail",  # rail friction [N]
     "backlash",
     "encoder_step",
-    "substeps",  # integration steps per output step (a stiff contact spring needs several)
+    "substeps",  # integration steps per output step
+    "contact_substeps",  # the same while a contact spring is (about to be) compressed
 )
 (
     MASS,
@@ -87,6 +89,7 @@ COLUMNS = (
     BACKLASH,
     ENCODER_STEP,
     SUBSTEPS,
+    CONTACT_SUBSTEPS,
 ) = range(len(COLUMNS))
 
 
@@ -158,10 +161,16 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
         rigid = 1.0 if row[BACKLASH] == 0.0 else 0.0
         s[:] = (row[Q0], 0.0, row[Q0], 0.0, row[Y0], row[V0], 0.0, rigid)
         spring = math.isfinite(row[STIFFNESS])
-        n_sub = int(row[SUBSTEPS])
-        h = dt / n_sub
         for k in range(steps):
             out_q[i, k], out_y[i, k] = s[QM], s[Y]
+            n_sub = int(row[SUBSTEPS])
+            if spring:
+                # the spring's finer steps while in contact, or about to be within this step
+                gap = s[Y] - row[ARM] * math.sin(s[QL])
+                closing = row[ARM] * math.cos(s[QL]) * s[WL] - s[V]
+                if gap < 2 * dt * max(closing, 0.0) + CONTACT_MARGIN_M:
+                    n_sub = int(row[CONTACT_SUBSTEPS])
+            h = dt / n_sub
             for _ in range(n_sub):
                 drive, load, acc_y = forces(row, s, h)
                 w_start = (s[WM], s[WL])
