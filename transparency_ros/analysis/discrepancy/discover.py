@@ -46,6 +46,7 @@ from transparency_ros.analysis.discrepancy.model import (
 from transparency_ros.core.errors import ModelError
 
 GRID_POINTS = 25
+PAIR_FINALISTS = 3  # pairs refitted with the effects found before them
 STATE_EXPLAINED = 0.3  # below: the leftover torque is not a function of the state
 SIGNIFICANT = 1.5  # a held-out error within 1.5x the noise floor has nothing left to explain
 LEFTOVER = 3.0  # a phase whose residual is above 3x the noise floor is left unexplained
@@ -578,24 +579,36 @@ class Discoverer:
         singles: list[_Step],
         base: _Base,
     ) -> list[_Step]:
-        """Every two remaining candidates added together, all parameters fitted jointly from
-        each one's own fit: two effects that are both missing may each explain too little alone
+        """Two candidates added together, all parameters fitted jointly from each one's own
+        fit: two effects that are both missing may each explain too little alone
         (one stands in for the other)."""
-        out = []
+        n = len(effects)
         ranked = sorted(singles, key=lambda c: c.rmse)  # a pair lists the better one first
+        fitted: list[tuple[float, _Step, _Step, list[FloatArray], Any]] = []
         for i, first in enumerate(ranked):
             for second in ranked[i + 1 :]:
                 added = [*first.added, *second.added]
                 self.progress(f"trying {' + '.join(c.name for c in added)}")
                 x0 = [*params, *(x for _, x in first.new()), *(x for _, x in second.new())]
-                joint, result = self._refit([*effects, *added], x0)
-                if result is None:
-                    continue
-                step = self._step(effects, joint, added, result, base)
-                step.joint = True
-                step.alone_rmse = [first.rmse]
-                step.alone_aic = [first.aic, second.aic]
-                out.append(step)
+                # the pair's own parameters first (the effects found before held)
+                own, result = self._refit([*effects, *added], x0, start=n)
+                cost = (
+                    2 * result.cost
+                    if result is not None
+                    else float(np.sum(self.problem.error([*effects, *added], own, False) ** 2))
+                )
+                fitted.append((cost, first, second, own, result))
+        fitted.sort(key=lambda f: f[0])
+        out = []
+        # then, for the best few, everything together
+        for _, first, second, own, own_fit in fitted[: PAIR_FINALISTS if n else len(fitted)]:
+            added = [*first.added, *second.added]
+            joint, result = (own, own_fit) if n == 0 else self._refit([*effects, *added], own)
+            step = self._step(effects, joint, added, result, base)
+            step.joint = result is not None  # (without it: no intervals)
+            step.alone_rmse = [first.rmse]
+            step.alone_aic = [first.aic, second.aic]
+            out.append(step)
         return out
 
     def _finding(self, cand: Any, step: _Step, base: _Base, before: float, after: float) -> Finding:
@@ -632,12 +645,12 @@ class Discoverer:
         )
 
     def _refit(
-        self, effects: Sequence[Any], params: Sequence[FloatArray]
+        self, effects: Sequence[Any], params: Sequence[FloatArray], start: int = 0
     ) -> tuple[list[FloatArray], Any]:
-        """All fittable parameters of ``effects`` fitted together on the fitting trials, from
-        their current values; (params, least-squares result) or (params, None) when there is
-        nothing to refit or the joint fit is no better."""
-        index = [i for i, e in enumerate(effects) if e.fittable]
+        """The fittable parameters of ``effects[start:]`` fitted together on the fitting trials
+        (the others held), from their current values; (params, least-squares result) or
+        (params, None) when there are fewer than two to fit or the joint fit is no better."""
+        index = [i for i, e in enumerate(effects) if e.fittable and i >= start]
         if len(index) < 2:
             return list(params), None
         sizes = [params[i].size for i in index]

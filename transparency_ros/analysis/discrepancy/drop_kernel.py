@@ -93,6 +93,11 @@ COLUMNS = (
 ) = range(len(COLUMNS))
 
 
+def parallel_jit(f: F) -> F:
+    """Compiled on first use, cached on disk; ``numba.prange`` loops run on all cores."""
+    return cast(F, numba.njit(cache=True, nogil=True, parallel=True)(f))
+
+
 @jit
 def sign(x: float) -> float:
     return 1.0 if x > 0.0 else -1.0 if x < 0.0 else 0.0
@@ -150,19 +155,21 @@ def sense(q: float, step: float) -> float:
 QM, WM, QL, WL, Y, V, GLUED, ENGAGED = range(8)
 
 
-@jit
+@parallel_jit
 def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
     """Fill ``out_q`` (motor position) and ``out_y`` (shuttle height), (rows, steps), for the
-    physics ``p`` (rows, COLUMNS)."""
-    s = np.empty(8)
-    for i in range(out_q.shape[0]):
+    physics ``p`` (rows, COLUMNS). Rows are independent: they run on all cores."""
+    for i in numba.prange(out_q.shape[0]):
         row = p[i]
+        s = np.empty(8)
         # with backlash the arm starts anywhere in the dead band: free until the gap closes
         rigid = 1.0 if row[BACKLASH] == 0.0 else 0.0
-        s[:] = (row[Q0], 0.0, row[Q0], 0.0, row[Y0], row[V0], 0.0, rigid)
+        s[QM], s[WM], s[QL], s[WL] = row[Q0], 0.0, row[Q0], 0.0
+        s[Y], s[V], s[GLUED], s[ENGAGED] = row[Y0], row[V0], 0.0, rigid
         spring = math.isfinite(row[STIFFNESS])
         for k in range(steps):
-            out_q[i, k], out_y[i, k] = s[QM], s[Y]
+            out_q[i, k] = s[QM]
+            out_y[i, k] = s[Y]
             n_sub = int(row[SUBSTEPS])
             if spring:
                 # the spring's finer steps while in contact, or about to be within this step
@@ -203,8 +210,9 @@ def forces(row: Any, s: Any, dt: float) -> tuple[float, float, float]:
         closing = r * cos * s[WL] - s[V]
         pen = r * math.sin(s[QL]) - s[Y] + 0.5 * dt * closing  # at the step's midpoint
         if pen > 0.0:
+            # the shuttle's weight (m g = m_s g r / r) reaches the arm through the spring only
             force = max(0.0, row[STIFFNESS] * pen + row[DAMPING] * closing)
-            load = -force * r * cos - weight * cos
+            load = -force * r * cos
             acc_y = force / m - weight / (m * r)
     elif s[GLUED]:
         load = -weight * cos
@@ -243,7 +251,9 @@ def joint_step(row: Any, s: Any, drive: float, load: float, dt: float) -> None:
     # the gap closed within the step: located (linearly), the two rejoin there if they close
     # on each other (momentum kept) and move as one for the rest of the step
     side = sign(gap)
-    f = min(max((side * half - (ql0 - qm0)) / (gap - (ql0 - qm0)), 0.0), 1.0)
+    moved = gap - (ql0 - qm0)
+    # (a gap already at the band's end, e.g. both held by friction, closes at the start)
+    f = min(max((side * half - (ql0 - qm0)) / moved, 0.0), 1.0) if moved != 0.0 else 0.0
     wm_hit, wl_hit = wm0 + (w_motor - wm0) * f, wl0 + (w_arm - wl0) * f
     if (wl_hit - wm_hit) * side < 0.0:  # parting already: held at the end of the band
         s[QL] = s[QM] + side * half
