@@ -6,16 +6,18 @@ recordings, :class:`~transparency_ros.analysis.discrepancy.drop.DropProblem` for
 
 Trials are split into fitting and held-out sets (whole trials, never samples of one trial). Each
 round fits every remaining candidate effect (its own parameters, bounded least squares on the
-simulation error of the fitting trials, the effects found so far kept), scores it on the
-held-out trials, and keeps the best only if it removes at least ``min_improvement`` of the
-held-out error above the noise floor (what sensor noise alone would cause), at least a tenth of
-the floor in absolute terms, and the held-out information criterion (n log(RSS/n) + 2k)
-improves by more than 10. A kept effect gets its parameters with 95 % confidence intervals
-(from the fit's Jacobian), where it acted (the motion phase whose residual it reduced most, and
-the trial and time window of the largest reduction) and the evidence. When no candidate
-passes, the held-out residual is checked for structure left (phase RMS against the noise
-floor, and its dominant frequency): what is left is reported as ``unexplained``, never forced
-onto a label.
+simulation error of the fitting trials; then all parameters found so far together with it),
+scores it on the held-out trials, and keeps the best only if it removes at least
+``min_improvement`` of the held-out error above the noise floor (what sensor noise alone would
+cause), at least a tenth of the floor in absolute terms, the held-out information criterion
+(n log(RSS/n) + 2k) improves by more than 10, and its fit is meaningful. When no single
+candidate passes and structure is left, candidates are fitted two at a time (two missing
+effects may each explain too little alone). A kept effect gets its parameters with 95 %
+confidence intervals (from the fit's Jacobian), where it acted (the motion phase whose residual
+it reduced most, and the trial and time window of the largest reduction) and the evidence. What
+is left is checked for structure (phase RMS against the noise floor, its dominant frequency, how
+much of it the state explains, the closest candidate) and reported as ``unexplained``, never
+forced onto a label.
 """
 
 from __future__ import annotations

@@ -22,7 +22,8 @@ other): the fall, from the release to 3 ms before contact (the shuttle height; t
 is the vertex of a parabola fitted to the fall), and the impact, from the recorded state 3 ms before
 contact to 0.25 s after (encoder position and shuttle height). Heights are compared as the arm
 angle they correspond to (height / r), so every error is in rad. All trials of a problem are
-integrated together, vectorised over trials, with a fixed step.
+integrated together, and every candidate value of a fit with them, by the compiled
+integrator of :mod:`transparency_ros.analysis.discrepancy.drop_kernel`.
 """
 
 from __future__ import annotations
