@@ -31,8 +31,10 @@ from rosbags.rosbag2 import Reader, ReaderError
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
 from transparency_ros.bag.errors import BagReadError
+from transparency_ros.bag.fast import FieldArrays, read_fields
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
+JOINT_STATE = "sensor_msgs/msg/JointState"
 
 
 def normalise_type(name: str) -> str:
@@ -266,9 +268,43 @@ class JointSeries:
     effort: np.ndarray  # (n,), NaN where absent
 
 
+def _fields(bag: BagSource, topic: str) -> FieldArrays | None:
+    """The fast path (:mod:`transparency_ros.bag.fast`) where it applies."""
+    if topic in bag.type_errors:
+        return None
+    return read_fields(bag.storage_paths, topic, bag.typestore, normalise_type)
+
+
+def _stamps(fields: FieldArrays) -> np.ndarray:
+    sec, nanosec = fields.fields["header.stamp.sec"], fields.fields["header.stamp.nanosec"]
+    return np.asarray(sec.astype(float) + nanosec.astype(float) * 1e-9)  # as stamp_s()
+
+
+def _fast_joint_series(bag: BagSource, topic: str, joint: str | None) -> JointSeries | None:
+    fields = _fields(bag, topic)
+    if fields is None:
+        return None
+    names = list(bag.typestore.deserialize_cdr(fields.first_message, JOINT_STATE).name)
+    if joint is not None and joint not in names:
+        empty = np.empty(0)
+        return JointSeries(empty, empty, empty, empty)
+    index = names.index(joint) if joint is not None else 0
+    stamp = _stamps(fields)
+    order = np.argsort(stamp, kind="stable")
+    nan = np.full(stamp.size, np.nan)
+
+    def at(name: str) -> np.ndarray:
+        return fields.fields.get(f"{name}[{index}]", nan).astype(float)[order]
+
+    return JointSeries(stamp[order], at("position"), at("velocity"), at("effort"))
+
+
 def joint_series(bag: BagSource, topic: str, joint: str | None = None) -> JointSeries:
     """One joint of a JointState topic as arrays (the first joint when ``joint`` is None)."""
-    bag.require_topic(topic, "sensor_msgs/msg/JointState")
+    bag.require_topic(topic, JOINT_STATE)
+    fast = _fast_joint_series(bag, topic, joint)
+    if fast is not None:
+        return fast
     rows: list[tuple[float, float, float, float]] = []
     for _topic, _log, msg in bag.messages([topic]):
         names = list(msg.name)
@@ -290,6 +326,10 @@ def scalar_series(bag: BagSource, topic: str, msgtype: str, field_path: str) -> 
     """(n, 2) array of [stamp_s, value] for a stamped message; ``field_path`` like
     'wrench.force.z' or 'point.z'."""
     bag.require_topic(topic, msgtype)
+    fields = _fields(bag, topic)
+    if fields is not None and field_path in fields.fields:
+        data = np.stack([_stamps(fields), fields.fields[field_path].astype(float)], axis=1)
+        return data[np.argsort(data[:, 0], kind="stable")]
     parts = field_path.split(".")
     rows = []
     for _topic, _log, msg in bag.messages([topic]):

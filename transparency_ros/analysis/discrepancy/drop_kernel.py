@@ -23,23 +23,17 @@ which value):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any, TypeVar, cast
+from typing import Any
 
 import numba
 import numpy as np
 
-F = TypeVar("F", bound=Callable[..., Any])
+from transparency_ros.core.compiled import jit, parallel_jit
 
 GRAVITY = 9.81
 GLUE_SPEED_M_S = 0.05  # a bounce slower than this ends the bouncing
 MAX_STRIKES = 4  # collisions located within one step
 CONTACT_MARGIN_M = 1e-5  # a gap this small counts as contact to come (arm and shuttle accelerate)
-
-
-def jit(f: F) -> F:
-    """Compiled on first use, cached on disk."""
-    return cast(F, numba.njit(cache=True, nogil=True)(f))
 
 
 # columns of the physics matrix of :func:`impact`, one row per simulated trial
@@ -91,11 +85,6 @@ COLUMNS = (
     SUBSTEPS,
     CONTACT_SUBSTEPS,
 ) = range(len(COLUMNS))
-
-
-def parallel_jit(f: F) -> F:
-    """Compiled on first use, cached on disk; ``numba.prange`` loops run on all cores."""
-    return cast(F, numba.njit(cache=True, nogil=True, parallel=True)(f))
 
 
 @jit
