@@ -64,6 +64,7 @@ _DTYPES = {
 BASE, NAME, ARRAY, SEQUENCE = 1, 2, 3, 4  # rosbags' Nodetype values
 MESSAGE_OPCODE = 0x05
 CHUNK_OPCODE = 0x06
+MAGIC = b"\x89MCAP0\r\n"
 
 
 @dataclass(frozen=True)
@@ -167,29 +168,45 @@ def _index_records(buf: Any, out: Any) -> int:
 
 
 def _chunks(path: Path) -> Any:
-    """Decompressed record buffers of every chunk of an MCAP file."""
-    from mcap.records import Chunk  # noqa: PLC0415
-    from mcap.stream_reader import StreamReader  # noqa: PLC0415
+    """Decompressed record buffers of every chunk of an MCAP file. The top-level records are
+    walked here (opcode, length): only chunks are parsed, the message indexes after each are
+    skipped (parsing them record by record cost more than reading the messages)."""
+    import mmap  # noqa: PLC0415
 
-    with path.open("rb") as f:
-        for record in StreamReader(f, skip_magic=False, emit_chunks=True).records:
-            if not isinstance(record, Chunk):
+    with path.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+        if data[:8] != MAGIC:
+            raise ValueError(f"{path}: not an MCAP file")
+        pos, end = 8, len(data) - 8
+        while pos + 9 <= end:
+            opcode = data[pos]
+            (length,) = struct.unpack_from("<Q", data, pos + 1)
+            body = pos + 9
+            pos = body + length
+            if opcode != CHUNK_OPCODE:
                 continue
-            if record.compression == "zstd":
-                import zstandard  # noqa: PLC0415
+            if pos > end + 8:
+                raise ValueError(f"{path}: truncated chunk")
+            (_start, _end, size, _crc, n) = struct.unpack_from("<QQQII", data, body)
+            compression = bytes(data[body + 32 : body + 32 + n]).decode()
+            (stored,) = struct.unpack_from("<Q", data, body + 32 + n)
+            first = body + 40 + n
+            yield np.frombuffer(
+                _decompress(data[first : first + stored], compression, size), np.uint8
+            )
 
-                data = zstandard.ZstdDecompressor().decompress(
-                    record.data, max_output_size=record.uncompressed_size
-                )
-            elif record.compression == "lz4":
-                import lz4.frame  # noqa: PLC0415
 
-                data = lz4.frame.decompress(record.data)
-            elif record.compression == "":
-                data = record.data
-            else:
-                raise ValueError(f"unknown chunk compression {record.compression!r}")
-            yield np.frombuffer(data, dtype=np.uint8)
+def _decompress(raw: bytes, compression: str, size: int) -> bytes:
+    if compression == "zstd":
+        import zstandard  # noqa: PLC0415
+
+        return bytes(zstandard.ZstdDecompressor().decompress(raw, max_output_size=size))
+    if compression == "lz4":
+        import lz4.frame  # noqa: PLC0415
+
+        return bytes(lz4.frame.decompress(raw))
+    if compression == "":
+        return bytes(raw)
+    raise ValueError(f"unknown chunk compression {compression!r}")
 
 
 def _channels(path: Path) -> dict[str, tuple[int, str]] | None:
@@ -219,31 +236,14 @@ class FieldArrays:
 
 
 class _Gather:
-    """The fields of one topic, chunk by chunk; False from a step: no fast path."""
+    """The fields of one topic, chunk by chunk; False from :meth:`add`: no fast path."""
 
-    def __init__(self, topic: str, typestore: Any, normalise: Any) -> None:
-        self.topic, self.typestore, self.normalise = topic, typestore, normalise
+    def __init__(self, typestore: Any, normalise: Any) -> None:
+        self.typestore, self.normalise = typestore, normalise
         self.layout: Layout | None = None
         self.first = b""
         self.times: list[np.ndarray] = []
         self.parts: dict[str, list[np.ndarray]] = {}
-
-    def add_file(self, path: Path) -> bool:
-        channels = _channels(path)
-        if channels is None:
-            return False
-        if self.topic not in channels:
-            return True
-        cid, schema = channels[self.topic]
-        for buf in _chunks(path):
-            index = np.empty((buf.size // 31 + 1, 4), dtype=np.int64)  # >= 31 bytes a record
-            n = _index_records(buf, index)
-            if n < 0:
-                return False
-            rows = index[:n][index[:n, 0] == cid]
-            if rows.size and not self.add(buf, rows, schema):
-                return False
-        return True
 
     def add(self, buf: np.ndarray, rows: np.ndarray, schema: str) -> bool:
         if self.layout is None:
@@ -268,25 +268,54 @@ class _Gather:
         self.times.append(rows[:, 1])
         return True
 
+    def result(self) -> FieldArrays | None:
+        if self.layout is None:
+            return None
+        return FieldArrays(
+            np.concatenate(self.times),
+            {k: np.concatenate(v) for k, v in self.parts.items()},
+            self.layout,
+            self.first,
+        )
+
+
+def read_topics(
+    paths: list[Path], topics: list[str], typestore: Any, normalise: Any = lambda n: n
+) -> dict[str, FieldArrays | None]:
+    """Every numeric field of each of ``topics`` from MCAP files ``paths`` (in order), in one
+    pass over the chunks; None for a topic where the fast path does not apply and the caller
+    must deserialize (see the module docstring)."""
+    none: dict[str, FieldArrays | None] = dict.fromkeys(topics)
+    if not paths or any(p.suffix != ".mcap" for p in paths):
+        return none
+    gathers = {t: _Gather(typestore, normalise) for t in topics}
+    failed: set[str] = set()
+    try:
+        for path in paths:
+            channels = _channels(path)
+            if channels is None:
+                return none
+            wanted = {channels[t][0]: (t, channels[t][1]) for t in topics if t in channels}
+            for buf in _chunks(path):
+                index = np.empty((buf.size // 31 + 1, 4), dtype=np.int64)  # >= 31 B a record
+                n = _index_records(buf, index)
+                if n < 0:
+                    return none
+                for cid, (topic, schema) in wanted.items():
+                    rows = index[:n][index[:n, 0] == cid]
+                    if (
+                        rows.size
+                        and topic not in failed
+                        and not gathers[topic].add(buf, rows, schema)
+                    ):
+                        failed.add(topic)
+    except (OSError, ValueError, KeyError, ImportError, EOFError, struct.error):
+        return none
+    return {t: None if t in failed else g.result() for t, g in gathers.items()}
+
 
 def read_fields(
     paths: list[Path], topic: str, typestore: Any, normalise: Any = lambda n: n
 ) -> FieldArrays | None:
-    """Every numeric field of ``topic`` from MCAP files ``paths`` (in order), or None when the
-    fast path does not apply and the caller must deserialize (see the module docstring)."""
-    if not paths or any(p.suffix != ".mcap" for p in paths):
-        return None
-    gather = _Gather(topic, typestore, normalise)
-    try:
-        if not all(gather.add_file(path) for path in paths):
-            return None
-    except (OSError, ValueError, KeyError, ImportError, EOFError):
-        return None
-    if gather.layout is None:
-        return None
-    return FieldArrays(
-        np.concatenate(gather.times),
-        {k: np.concatenate(v) for k, v in gather.parts.items()},
-        gather.layout,
-        gather.first,
-    )
+    """:func:`read_topics` for one topic."""
+    return read_topics(paths, [topic], typestore, normalise)[topic]
