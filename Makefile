@@ -48,7 +48,13 @@ pytest: $(STAMP)
 
 test: lint typecheck pytest
 
+# All benchmarks, one run (about 10 min on 2 cores; the first run also writes a 10M-message bag
+# into benchmarks/.cache/). Results: benchmarks/results/*.md, quoted in the README.
 bench: $(STAMP)
+	$(BIN)/python benchmarks/contact_latency.py
+	$(BIN)/python benchmarks/bag_throughput.py
+	$(BIN)/python benchmarks/model_sweep.py
+	$(BIN)/python benchmarks/discrepancy_scaling.py
 	$(BIN)/python benchmarks/driver_loop.py
 
 # Re-resolve the pins (run by a maintainer, then commit requirements/constraints.txt).
