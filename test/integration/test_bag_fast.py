@@ -130,3 +130,30 @@ def test_fast_and_deserializing_series_are_identical(
         assert np.array_equal(a, b, equal_nan=True), name
     assert np.array_equal(fast[0].position, values[:, 1])
     assert np.array_equal(fast[1], slow[1])
+
+
+def test_messages_outside_chunks_are_not_skipped(tmp_path: Path) -> None:
+    """An MCAP file written without chunks: the fast path reads chunks only, so it must step
+    aside (not return a silently short stream); rosbags reads the messages."""
+    from mcap.writer import Writer  # noqa: PLC0415
+
+    from transparency_ros.bag.writer import TYPESTORE  # noqa: PLC0415
+
+    path = tmp_path / "unchunked.mcap"
+    with path.open("wb") as f:
+        writer = Writer(f, use_chunking=False)
+        writer.start(profile="ros2", library="test")
+        schema = writer.register_schema(
+            "sensor_msgs/msg/JointState", "ros2msg", b"# (known to the typestore)"
+        )
+        channel = writer.register_channel("/joint_states", "cdr", schema)
+        for i in range(20):
+            data = TYPESTORE.serialize_cdr(
+                _joint_state(i * 1000, ["j"], [float(i)]), "sensor_msgs/msg/JointState"
+            )
+            writer.add_message(channel, log_time=i * 1000, data=bytes(data), publish_time=i)
+        writer.finish()
+    with open_bag(path) as bag:
+        assert read_fields(bag.storage_paths, "/joint_states", bag.typestore) is None
+        series = joint_series(bag, "/joint_states")
+    assert np.array_equal(series.position, np.arange(20.0))

@@ -182,6 +182,8 @@ def _chunks(path: Path) -> Any:
             (length,) = struct.unpack_from("<Q", data, pos + 1)
             body = pos + 9
             pos = body + length
+            if opcode == MESSAGE_OPCODE:  # outside a chunk: not read here, so no fast path
+                raise ValueError(f"{path}: messages outside chunks")
             if opcode != CHUNK_OPCODE:
                 continue
             if pos > end + 8:
@@ -209,19 +211,22 @@ def _decompress(raw: bytes, compression: str, size: int) -> bytes:
     raise ValueError(f"unknown chunk compression {compression!r}")
 
 
-def _channels(path: Path) -> dict[str, tuple[int, str]] | None:
-    """topic -> (channel id, schema name) from the file's summary (None: no summary)."""
+def _channels(path: Path) -> dict[str, tuple[int, str, int | None]] | None:
+    """topic -> (channel id, schema name, message count if the summary has statistics) from
+    the file's summary (None: no summary)."""
     from mcap.reader import make_reader  # noqa: PLC0415
 
     with path.open("rb") as f:
         summary = make_reader(f).get_summary()
     if summary is None:
         return None
+    counts = summary.statistics.channel_message_counts if summary.statistics else None
     out = {}
     for cid, channel in summary.channels.items():
         schema = summary.schemas.get(channel.schema_id)
         if schema is not None and channel.message_encoding == "cdr":
-            out[channel.topic] = (cid, schema.name)
+            count = None if counts is None else counts.get(cid, 0)
+            out[channel.topic] = (cid, schema.name, count)
     return out
 
 
@@ -244,6 +249,7 @@ class _Gather:
         self.first = b""
         self.times: list[np.ndarray] = []
         self.parts: dict[str, list[np.ndarray]] = {}
+        self.count = 0
 
     def add(self, buf: np.ndarray, rows: np.ndarray, schema: str) -> bool:
         if self.layout is None:
@@ -266,6 +272,7 @@ class _Gather:
             cols = buf[starts[:, None] + (leaf.offset + np.arange(width))]
             self.parts[leaf.path].append(np.ascontiguousarray(cols).view(leaf.dtype)[:, 0])
         self.times.append(rows[:, 1])
+        self.count += rows.shape[0]
         return True
 
     def result(self) -> FieldArrays | None:
@@ -296,6 +303,7 @@ def read_topics(
             if channels is None:
                 return none
             wanted = {channels[t][0]: (t, channels[t][1]) for t in topics if t in channels}
+            before = {t: g.count for t, g in gathers.items()}
             for buf in _chunks(path):
                 index = np.empty((buf.size // 31 + 1, 4), dtype=np.int64)  # >= 31 B a record
                 n = _index_records(buf, index)
@@ -309,6 +317,11 @@ def read_topics(
                         and not gathers[topic].add(buf, rows, schema)
                     ):
                         failed.add(topic)
+            # every message the file's statistics count was read, or no fast path
+            for topic in topics:
+                expected = channels[topic][2] if topic in channels else 0
+                if expected is not None and gathers[topic].count - before[topic] != expected:
+                    failed.add(topic)
     except (OSError, ValueError, KeyError, ImportError, EOFError, struct.error):
         return none
     return {t: None if t in failed else g.result() for t, g in gathers.items()}
