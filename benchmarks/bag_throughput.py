@@ -17,7 +17,6 @@ benchmarks/.cache/ and reused). Writes benchmarks/results/bag_throughput.md and 
 from __future__ import annotations
 
 import argparse
-import json
 import multiprocessing
 import resource
 import time
@@ -25,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _results import write_results
 
 CACHE = Path(__file__).parent / ".cache"
 TOPICS = {
@@ -240,13 +240,7 @@ def main() -> int:
             f"{big['peak_mb']:.0f} MB (fresh process, imports included)."
         )
     lines += ["", "(`.venv/bin/python benchmarks/bag_throughput.py`)"]
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "bag_throughput.md").write_text("\n".join(lines) + "\n")
-    (out / "bag_throughput.json").write_text(
-        json.dumps({"readers": results, "big": big}, indent=1) + "\n"
-    )
-    print("\n".join(lines))
+    write_results(args.out, "bag_throughput", lines, {"readers": results, "big": big})
     ok = all(r.get("identical_values", True) for r in results.values())
     return 0 if ok else 1
 

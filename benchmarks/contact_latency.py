@@ -23,7 +23,6 @@ benchmarks/results/contact_latency.md and .json.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import threading
 import time
@@ -31,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _results import write_results
 
 PERIOD_SAMPLES = 50  # an onset every 50 samples
 DEFLECTED_SAMPLES = 5
@@ -233,11 +233,7 @@ def main() -> int:
             f"| {s['p99_ms']:.3f} |"
         )
     lines += ["", "(`.venv/bin/python benchmarks/contact_latency.py`)"]
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "contact_latency.md").write_text("\n".join(lines) + "\n")
-    (out / "contact_latency.json").write_text(json.dumps(rows, indent=1) + "\n")
-    print("\n".join(lines))
+    write_results(args.out, "contact_latency", lines, rows)
     return 0
 
 

@@ -15,7 +15,6 @@ before the clock starts. Writes benchmarks/results/discrepancy_scaling.md and .j
 from __future__ import annotations
 
 import argparse
-import json
 import multiprocessing
 import resource
 import sys
@@ -26,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _results import write_results
 
 sys.path.insert(0, str(Path(__file__).parent))
 
@@ -147,11 +147,7 @@ def main() -> int:
         f"{time.perf_counter() - started:.0f} s in all "
         "(`.venv/bin/python benchmarks/discrepancy_scaling.py`).",
     ]
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "discrepancy_scaling.md").write_text("\n".join(lines) + "\n")
-    (out / "discrepancy_scaling.json").write_text(json.dumps(rows, indent=1) + "\n")
-    print("\n".join(lines))
+    write_results(args.out, "discrepancy_scaling", lines, rows)
     return 0
 
 

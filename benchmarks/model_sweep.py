@@ -14,12 +14,12 @@ Writes benchmarks/results/model_sweep.md and .json.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from _results import write_results
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -91,11 +91,7 @@ def main() -> int:
         "",
         "(`.venv/bin/python benchmarks/model_sweep.py`)",
     ]
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "model_sweep.md").write_text("\n".join(lines) + "\n")
-    (out / "model_sweep.json").write_text(json.dumps(rows, indent=1) + "\n")
-    print("\n".join(lines))
+    write_results(args.out, "model_sweep", lines, rows)
     return 0 if all(r["detection_agrees"] for r in rows) else 1
 
 
