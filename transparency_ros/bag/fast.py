@@ -104,7 +104,9 @@ class _Walker:
         kind, detail = node
         if kind == BASE:
             name = detail[0]
-            if name in ("string", "wstring"):
+            if name == "wstring":
+                raise ValueError("wstring: not read here")  # (its width is not one byte)
+            if name == "string":
                 n = self.count()
                 self.fixed[-1] = (self.fixed[-1][0], 4 + n)  # the length and the text
                 self.pos += n
@@ -135,7 +137,7 @@ def layout(typestore: Any, msgtype: str, data: bytes) -> Layout | None:
         walker.node("", (NAME, msgtype))
     except (struct.error, KeyError, ValueError):
         return None
-    if walker.pos > len(data):
+    if not len(data) - 8 < walker.pos <= len(data):  # all of it read, but for padding
         return None
     return Layout(len(data), walker.leaves, walker.fixed)
 
