@@ -157,3 +157,23 @@ def test_messages_outside_chunks_are_not_skipped(tmp_path: Path) -> None:
         assert read_fields(bag.storage_paths, "/joint_states", bag.typestore) is None
         series = joint_series(bag, "/joint_states")
     assert np.array_equal(series.position, np.arange(20.0))
+
+
+def test_large_messages_such_as_images_are_left_to_rosbags(tmp_path: Path) -> None:
+    out = tmp_path / "images"
+    types = message_types()
+    with BagWriter(out) as bag:
+        bag.add("/image", "sensor_msgs/msg/Image")
+        for i in range(3):
+            image = types["sensor_msgs/msg/Image"](
+                header=types["std_msgs/msg/Header"](stamp=time_msg(i), frame_id="cam"),
+                height=16,
+                width=16,
+                encoding="mono8",
+                is_bigendian=0,
+                step=16,
+                data=np.full(256, i, dtype=np.uint8),
+            )
+            bag.write_message("/image", i, image)
+    with open_bag(out) as bag:
+        assert read_fields(bag.storage_paths, "/image", bag.typestore) is None

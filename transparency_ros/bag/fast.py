@@ -65,6 +65,8 @@ BASE, NAME, ARRAY, SEQUENCE = 1, 2, 3, 4  # rosbags' Nodetype values
 MESSAGE_OPCODE = 0x05
 CHUNK_OPCODE = 0x06
 MAGIC = b"\x89MCAP0\r\n"
+# more numeric fields than this (an image, a point cloud): not a stream of samples, no fast path
+MAX_LEAVES = 256
 
 
 @dataclass(frozen=True)
@@ -113,6 +115,8 @@ class _Walker:
                 return
             size = _SIZES[name]
             self.align(size)
+            if len(self.leaves) == MAX_LEAVES:
+                raise ValueError("too many fields")
             self.leaves.append(Leaf(path, _DTYPES[name], self.pos))
             self.pos += size
         elif kind == NAME:
