@@ -44,7 +44,7 @@ def test_offset_filter_and_clock(ros_context: Context) -> None:
     try:
         done = subprocess.run(
             [EXE, str(BAG), "--topics", "/joint_states", "--start-offset", str(offset_s),
-             "--clock", "--rate", "0.5", "--delay", "1.0"],
+             "--clock", "--rate", "0.5", "--delay", "1.0", "--wait-for-subscribers", "1"],
             capture_output=True, text=True, timeout=60, check=False,
         )  # fmt: skip
         assert done.returncode == 0, done.stderr
