@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from transparency_ros.core.compiled import jit
+from transparency_ros.core.compiled import jit_on_first_call
 
 _SIZES = {
     "bool": 1,
@@ -146,7 +146,7 @@ def layout(typestore: Any, msgtype: str, data: bytes) -> Layout | None:
     return Layout(len(data), walker.leaves, walker.fixed)
 
 
-@jit
+@jit_on_first_call
 def _index_records(buf: Any, out: Any) -> int:
     """(channel, log time, data start, data length) of every message record in ``buf`` (the
     records of a chunk), into ``out`` (rows); how many were found (-1: malformed)."""
