@@ -263,14 +263,6 @@ def load_drop_nominal(path: str | Path | None, trials: Sequence[DropTrial]) -> D
     return DropNominal(**values)
 
 
-@dataclass
-class Simulated:
-    """Simulated encoder position and shuttle height at the compared samples."""
-
-    q: list[FloatArray]
-    height: list[FloatArray]
-
-
 class DropSimulator:
     """The impact pieces of a set of trials, integrated together."""
 
