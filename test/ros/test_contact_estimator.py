@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import itertools
 import math
+import struct
+import threading
 from collections.abc import Iterator
 from typing import Any
 
@@ -13,6 +15,7 @@ rclpy = pytest.importorskip("rclpy")
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from rclpy.context import Context  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
@@ -60,7 +63,8 @@ class Rig:
         self.states_pub = p.create_publisher(JointState, "/joint_states", 100)
         self.commands_pub = p.create_publisher(JointState, "/joint_commands", 10)
         self.spinner = Spinner(context, self.node, p)
-        assert wait_for(lambda: self.states_pub.get_subscription_count() > 0)
+        if not params.get("in_process"):
+            assert wait_for(lambda: self.states_pub.get_subscription_count() > 0)
 
     def send(self, stamp_s: float, position: float, name: str = "arm", **extra: Any) -> None:
         msg = JointState(name=[name], position=[position], **extra)
@@ -145,6 +149,8 @@ def test_bad_samples_are_rejected_counted_and_the_node_goes_on(rig_factory: Any)
     rig.states_pub.publish(JointState(name=["arm"], position=[0.0, 1.0]))  # length mismatch
     rig.send(9.000, 0.0)  # stamp going backwards
     rig.send(10.000, 0.0)  # duplicated stamp
+    rig.states_pub.publish(b"\x00\x01\x00\x00\x05\x00")  # bytes, not a JointState
+    rig.states_pub.publish(b"")
     rig.send(10.003, -0.2)  # valid: a contact
     assert wait_for(lambda: len(rig.contacts) == 1)
     rejected = rig.node.pipeline.rejected
@@ -153,13 +159,69 @@ def test_bad_samples_are_rejected_counted_and_the_node_goes_on(rig_factory: Any)
         "unknown_joint": 1,
         "length_mismatch": 1,
         "stamp_not_increasing": 2,
+        "undecodable": 2,
     }
     assert wait_for(
-        lambda: bool(rig.diagnostics) and rig.diagnostics[-1]["rejected_total"] == "5",
+        lambda: bool(rig.diagnostics) and rig.diagnostics[-1]["rejected_total"] == "7",
         timeout_s=3.0,
     )
     d = rig.diagnostics[-1]
-    assert d["rejected_stamp_not_increasing"] == "2" and float(d["latency_p99_us"]) > 0
+    assert d["rejected_stamp_not_increasing"] == "2"
+    # the handler's time is per period: some period saw the samples
+    assert any(float(x["latency_p99_us"]) > 0 for x in rig.diagnostics)
+    assert d["rejected_undecodable"] == "2"
+    # the two good samples were stamped 10.0 s after the epoch: they went out ~56 years late
+    assert d["sample_age_count"] == "2" and d["onset_age_count"] == "1"
+    assert float(d["onset_age_p50_us"]) == pytest.approx(rig.node.onset_age.max_s * 1e6, rel=0.01)
+
+
+def _big_endian_joint_state(sec: int, nanosec: int, name: str, position: float) -> bytes:
+    """JointState(name=[name], position=[position]) in big-endian CDR, which core.cdr leaves
+    to rclpy's deserializer."""
+    text = name.encode() + b"\x00"
+    body = struct.pack(">iII", sec, nanosec, 1) + b"\x00\x00\x00\x00"  # stamp, frame_id ''
+    body += struct.pack(">II", 1, len(text)) + text
+    body += b"\x00" * (-len(body) % 4) + struct.pack(">I", 1)
+    body += b"\x00" * (-len(body) % 8) + struct.pack(">dII", position, 0, 0)
+    return b"\x00\x00\x00\x00" + body
+
+
+def test_big_endian_samples_are_read_too(rig_factory: Any) -> None:
+    rig = rig_factory(contact_onset_rad=0.1, contact_release_rad=0.05)
+    rig.states_pub.publish(_big_endian_joint_state(20, 500, "arm", -0.25))
+    assert wait_for(lambda: len(rig.contacts) == 1)
+    assert stamp_of(rig.contacts[0]) == pytest.approx(20.0000005, abs=1e-9)
+    assert rig.contacts[0].wrench.torque.z == pytest.approx(2.0 * 0.25)
+    assert rig.node.pipeline.rejected == {}
+
+
+def test_composes_with_a_multi_threaded_executor(ros_context: Context) -> None:
+    """The hot path has its own thread: any executor serves the rest of the node."""
+    node = ContactEstimatorNode(context=ros_context)
+    probe = Node("estimator_probe_mt", context=ros_context)
+    got: list[JointState] = []
+    probe.create_subscription(JointState, "/estimated_effort", got.append, 100)
+    pub = probe.create_publisher(JointState, "/joint_states", 100)
+    executor = MultiThreadedExecutor(num_threads=2, context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    try:
+        assert wait_for(lambda: pub.get_subscription_count() > 0)
+        for i in range(50):
+            msg = JointState(name=["arm"], position=[0.001 * i])
+            msg.header.stamp.sec, msg.header.stamp.nanosec = 30, i * 1000
+            pub.publish(msg)
+        assert wait_for(lambda: len(got) == 50)
+        assert [m.effort[0] for m in got] == pytest.approx([-0.002 * i for i in range(50)])
+        assert node.reconfigure(k_s=3.0) is None  # parameter services: the executor
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+        thread.join(timeout=5)
+    assert not node.hot_path._thread or not node.hot_path._thread.is_alive()
 
 
 def test_runtime_parameters_are_validated(rig_factory: Any) -> None:
@@ -173,7 +235,10 @@ def test_runtime_parameters_are_validated(rig_factory: Any) -> None:
     assert rig.contacts[0].wrench.torque.z == pytest.approx(4.0 * 0.03)
 
 
-def test_with_the_driver_the_event_stamp_is_a_joint_state_stamp(ros_context: Context) -> None:
+@pytest.mark.parametrize("in_process", [False, True], ids=["through DDS", "in-process"])
+def test_with_the_driver_the_event_stamp_is_a_joint_state_stamp(
+    ros_context: Context, in_process: bool
+) -> None:
     driver = ActuatorDriverNode(
         context=ros_context,
         parameter_overrides=[
@@ -182,7 +247,7 @@ def test_with_the_driver_the_event_stamp_is_a_joint_state_stamp(ros_context: Con
             Parameter("reply_timeout_s", value=0.002),
         ],
     )
-    rig = Rig(ros_context, contact_onset_rad=0.1, contact_release_rad=0.05)
+    rig = Rig(ros_context, contact_onset_rad=0.1, contact_release_rad=0.05, in_process=in_process)
     driver_states: list[float] = []
     rig.probe.create_subscription(
         JointState, "/joint_states", lambda m: driver_states.append(stamp_of(m)), 1000
@@ -195,6 +260,8 @@ def test_with_the_driver_the_event_stamp_is_a_joint_state_stamp(ros_context: Con
         onset = stamp_of(rig.contacts[0])
         assert min(abs(onset - s) for s in driver_states) < 1e-9
         assert rig.contacts[0].header.frame_id == "joint"
+        # in-process: no DDS reader of /joint_states on the estimator, the probe's is the only one
+        assert driver._joint_pub.get_subscription_count() == (1 if in_process else 2)
     finally:
         driver.make_safe()
         extra.stop()

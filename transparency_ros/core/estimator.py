@@ -338,31 +338,32 @@ class EstimatorPipeline:
     _commands: dict[str, tuple[float, float, float | None]] = field(default_factory=dict)
     _last_stamp: dict[str, float] = field(default_factory=dict)
 
-    def _reject(self, reason: str, detail: str) -> SampleRejectedError:
+    def reject(self, reason: str, detail: str) -> SampleRejectedError:
+        """Count a rejection under ``reason``; the error to raise (or drop) with ``detail``."""
         self.rejected[reason] = self.rejected.get(reason, 0) + 1
         return SampleRejectedError(reason, detail)
 
     def _check_arrays(self, names: list[str], arrays: dict[str, list[float]]) -> None:
         if not names:
-            raise self._reject("no_names", "a sample must name its joints")
+            raise self.reject("no_names", "a sample must name its joints")
         for label, values in arrays.items():
             if values and len(values) != len(names):
-                raise self._reject(
+                raise self.reject(
                     "length_mismatch", f"{len(values)} {label} for {len(names)} names"
                 )
         unknown = [n for n in names if self.joints and n not in self.joints]
         if unknown:
-            raise self._reject("unknown_joint", f"{unknown} not in {sorted(self.joints)}")
+            raise self.reject("unknown_joint", f"{unknown} not in {sorted(self.joints)}")
 
     def command(self, names: list[str], positions: list[float], velocities: list[float],
                 stamp_s: float | None = None) -> None:  # fmt: skip
         """A /joint_commands message: theta_d (and theta_d') per joint, stamped or not."""
         self._check_arrays(names, {"positions": positions, "velocities": velocities})
         if not positions:
-            raise self._reject("no_position", "a command needs positions")
+            raise self.reject("no_position", "a command needs positions")
         values = list(positions) + list(velocities)
         if not all(math.isfinite(v) for v in values):
-            raise self._reject("not_finite", "NaN or inf in a command")
+            raise self.reject("not_finite", "NaN or inf in a command")
         for i, name in enumerate(names):
             self._commands[name] = (positions[i], velocities[i] if velocities else 0.0, stamp_s)
 
@@ -372,16 +373,14 @@ class EstimatorPipeline:
         """A /joint_states message. Raises SampleRejectedError (counted) for a bad sample."""
         self._check_arrays(names, {"positions": positions, "velocities": velocities})
         if not positions:
-            raise self._reject("no_position", "a joint state needs positions")
+            raise self.reject("no_position", "a joint state needs positions")
         values = list(positions) + list(velocities) + [stamp_s]
         if not all(math.isfinite(v) for v in values):
-            raise self._reject("not_finite", "NaN or inf in a joint state")
+            raise self.reject("not_finite", "NaN or inf in a joint state")
         for name in names:
             last = self._last_stamp.get(name)
             if last is not None and stamp_s <= last:
-                raise self._reject(
-                    "stamp_not_increasing", f"{name}: {stamp_s:.9f} after {last:.9f}"
-                )
+                raise self.reject("stamp_not_increasing", f"{name}: {stamp_s:.9f} after {last:.9f}")
         self.samples += 1
         estimates: list[JointEstimate] = []
         events: list[ContactEvent] = []

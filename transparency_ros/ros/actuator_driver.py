@@ -52,6 +52,7 @@ from transparency_ros.canbus.sim_device import (
 )
 from transparency_ros.core.actuator_physics import ActuatorPhysics, Environment, PhysicsParams
 from transparency_ros.core.ball_on_rail import BallOnRail
+from transparency_ros.core.cdr import encode_joint_state
 from transparency_ros.core.config import get_actuator, load_drop_test
 from transparency_ros.core.driver import (
     CommandRejectedError,
@@ -65,6 +66,7 @@ from transparency_ros.core.driver import (
 from transparency_ros.core.drop_rig import DropRig, RigParams
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.feel_cage_config import load_setup
+from transparency_ros.ros import in_process
 from transparency_ros.ros.conversions import s_to_stamp, stamp_to_s
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, parse_node_cli
 from transparency_ros.ros.sim_ball import SimBallInterface
@@ -549,16 +551,23 @@ class ActuatorDriverNode(LifecycleNode):
         return self._to_ros(monotonic_s)
 
     def _publish_sample(self, fb: Feedback, sampled_s: float) -> None:
-        msg = JointState()
-        # when the reply was on the bus (see canbus.loop), not when read or published
-        msg.header.stamp = s_to_stamp(self._ros_seconds_at(sampled_s))
-        msg.name = [self.values["joint_name"]]
-        msg.position = [fb.position_rad]
-        msg.velocity = [fb.velocity_rad_s]
-        msg.effort = [fb.torque_nm]
         pub = self._joint_pub
-        if pub is not None:
-            pub.publish(msg)
+        if pub is None:
+            return
+        # when the reply was on the bus (see canbus.loop), not when read or published
+        stamp = s_to_stamp(self._ros_seconds_at(sampled_s))
+        data = encode_joint_state(
+            stamp.sec,
+            stamp.nanosec,
+            "",
+            [self.values["joint_name"]],
+            position=[fb.position_rad],
+            velocity=[fb.velocity_rad_s],
+            effort=[fb.torque_nm],
+        )
+        # serialized here (cheaper than rclpy's message objects), and handed directly to an
+        # estimator composed into this process (ros.in_process)
+        in_process.publish(pub, self.context, "/joint_states", data)
 
     def _on_command(self, msg: JointState) -> None:
         now = time.monotonic()

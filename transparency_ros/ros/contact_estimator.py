@@ -13,32 +13,44 @@ for joints without commands). Publishes, with standard interfaces only:
   level);
 * ~/state/<joint>    std_msgs/UInt8, latched (transient local): 0 no contact, 1 contact,
   2 collision, published on every change;
-* /diagnostics       rates, rejected samples by reason, processing latency, events.
+* /diagnostics       rates, rejected samples by reason, processing time, sample age, events.
 
 Bad samples are rejected and counted, never crash the node. The logic is in
 ``core.estimator`` (EstimatorPipeline); this file converts messages and parameters.
+
+/joint_states is served by the node's own thread as serialized bytes (``ros.hot_path``, decoded
+by ``core.cdr``; anything else, such as big-endian CDR, goes through rclpy's deserializer), and
+the per-sample outputs are published as bytes: the rest of the node runs on whichever executor it
+is added to. ``self.lock`` guards the pipeline between the two.
 """
 
 from __future__ import annotations
 
 import math
 import sys
+import threading
 import time
-from collections import deque
 from dataclasses import replace
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt8
 from std_srvs.srv import Trigger
 
+from transparency_ros.core.cdr import (
+    CdrError,
+    JointStateFields,
+    decode_joint_state,
+    encode_joint_state,
+    encode_wrench_stamped,
+)
 from transparency_ros.core.estimator import (
     ContactEvent,
     DetectorSettings,
@@ -49,7 +61,10 @@ from transparency_ros.core.estimator import (
     SampleRejectedError,
     SchmittDetector,
 )
+from transparency_ros.core.histogram import DurationHistogram
+from transparency_ros.ros import in_process
 from transparency_ros.ros.conversions import s_to_stamp, stamp_to_s
+from transparency_ros.ros.hot_path import HotPath
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, run_node
 
 NODE_NAME = "contact_estimator"
@@ -111,6 +126,21 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         high=10.0,
     ),
     P("diagnostics_period_s", 1.0, "/diagnostics period [s]", read_only=True, low=0.01, high=60.0),
+    P(
+        "queue_depth",
+        1000,
+        "/joint_states samples kept while the node catches up (0.1 s at 10 kHz)",
+        read_only=True,
+        low=1,
+        high=100000,
+    ),
+    P(
+        "in_process",
+        False,
+        "take /joint_states only from a source composed into this process (ros.in_process: "
+        "no DDS on the way in; for one process with the driver)",
+        read_only=True,
+    ),
 )
 DETECTOR_PARAMS = {
     "contact_onset_rad": "contact_onset", "contact_release_rad": "contact_release",
@@ -150,14 +180,37 @@ class ContactEstimatorNode(Node):
         }
         self._state_pubs: dict[str, Any] = {}
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_subscription(JointState, "/joint_states", self._on_state, 100)
+        self.lock = threading.Lock()  # the pipeline and the statistics, across the two threads
         self.create_subscription(JointState, "/joint_commands", self._on_command, 10)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(self.values["diagnostics_period_s"], self._publish_diagnostics)
         self.events_published = 0
-        self._latency_us: deque[float] = deque(maxlen=5000)
-        self._arrivals: deque[float] = deque(maxlen=5000)
+        # per diagnostics period: samples arrived, time in the /joint_states handler
+        self._period_start_s = time.monotonic()
+        self._period_arrivals = 0
+        self.handler_time = DurationHistogram()
+        # since start (or ~/reset): wall-clock time at publish - the sample's stamp (meaningful
+        # when the source stamps with this machine's clock), of every estimate and every onset
+        self.sample_age = DurationHistogram()
+        self.onset_age = DurationHistogram()
         self._last_warn_s = -math.inf
+        self.hot_path = HotPath(self)
+        self._leave_in_process = None
+        if self.values["in_process"]:
+            self._leave_in_process = in_process.subscribe(
+                self.context, "/joint_states", self.hot_path.guarded(self._on_state_bytes)
+            )
+        else:
+            self.hot_path.subscribe(
+                JointState, "/joint_states", self.values["queue_depth"], self._on_state_bytes
+            )
+            self.hot_path.start()
+
+    def destroy_node(self) -> None:
+        if self._leave_in_process is not None:
+            self._leave_in_process()
+        self.hot_path.stop()
+        super().destroy_node()
 
     # ----------------------------------------------------------------- parameters
 
@@ -178,11 +231,11 @@ class ContactEstimatorNode(Node):
     def _apply(self, params: list[Parameter]) -> None:
         for p in params:
             self.values[p.name] = p.value
-        self.pipeline.gains = EstimatorGains(
-            **{f: self.values[n] for n, f in GAIN_PARAMS.items()}
-        ).validated()
-        self.pipeline.detector.default = detector_settings(self.values)
-        self.pipeline.default_theta_d_rad = self.values["theta_d_rad"]
+        gains = EstimatorGains(**{f: self.values[n] for n, f in GAIN_PARAMS.items()}).validated()
+        with self.lock:
+            self.pipeline.gains = gains
+            self.pipeline.detector.default = detector_settings(self.values)
+            self.pipeline.default_theta_d_rad = self.values["theta_d_rad"]
 
     # ----------------------------------------------------------------- data
 
@@ -195,44 +248,84 @@ class ContactEstimatorNode(Node):
     def _on_command(self, msg: JointState) -> None:
         try:
             stamp = stamp_to_s(msg.header.stamp)
-            self.pipeline.command(
-                list(msg.name), list(msg.position), list(msg.velocity), stamp if stamp > 0 else None
-            )
+            with self.lock:
+                self.pipeline.command(
+                    list(msg.name),
+                    list(msg.position),
+                    list(msg.velocity),
+                    stamp if stamp > 0 else None,
+                )
         except SampleRejectedError as err:
             self._warn(f"rejected /joint_commands: {err}")
 
-    def _on_state(self, msg: JointState) -> None:
-        started = time.perf_counter()
-        self._arrivals.append(time.monotonic())
-        stamp = stamp_to_s(msg.header.stamp)
+    def _decode(self, data: bytes) -> JointStateFields | None:
         try:
-            estimates, events = self.pipeline.sample(
-                stamp, list(msg.name), list(msg.position), list(msg.velocity)
-            )
-        except SampleRejectedError as err:
-            self._warn(f"rejected /joint_states: {err}")
-            return
-        for event in events:  # first: a behavior waits for them
-            self._publish_event(event)
-        out = JointState()
-        out.header.stamp = msg.header.stamp
-        out.name = [e.joint for e in estimates]
-        out.position = [e.error_rad for e in estimates]
-        out.effort = [e.torque_nm for e in estimates]
-        self._estimate_pub.publish(out)
-        self._latency_us.append((time.perf_counter() - started) * 1e6)
+            return decode_joint_state(data)
+        except CdrError as fast_error:
+            try:  # what core.cdr does not read (big-endian CDR): rclpy's deserializer
+                msg = deserialize_message(data, JointState)
+            except Exception:  # noqa: BLE001 - any failure means the bytes are not a JointState
+                with self.lock:
+                    self.pipeline.reject("undecodable", str(fast_error))
+                self._warn(f"rejected /joint_states: not a JointState ({fast_error})")
+                return None
+        stamp = msg.header.stamp
+        return JointStateFields(
+            stamp.sec, stamp.nanosec, msg.header.frame_id, list(msg.name),
+            tuple(msg.position), tuple(msg.velocity), tuple(msg.effort),
+        )  # fmt: skip
 
-    def _publish_event(self, event: ContactEvent) -> None:
+    def _on_state_bytes(self, data: bytes) -> None:
+        started = time.perf_counter()
+        sample = self._decode(data)
+        if sample is None:
+            return
+        stamp_ns = sample.sec * 1_000_000_000 + sample.nanosec
+        with self.lock:
+            self._period_arrivals += 1
+            try:
+                estimates, events = self.pipeline.sample(
+                    sample.sec + sample.nanosec * 1e-9,
+                    sample.name,
+                    list(sample.position),
+                    list(sample.velocity),
+                )
+            except SampleRejectedError as err:
+                self._warn(f"rejected /joint_states: {err}")
+                return
+            for event in events:  # first: a behavior waits for them
+                self._publish_event(event, stamp_ns)
+            self._estimate_pub.publish(
+                encode_joint_state(
+                    sample.sec,
+                    sample.nanosec,
+                    "",
+                    [e.joint for e in estimates],
+                    position=[e.error_rad for e in estimates],
+                    effort=[e.torque_nm for e in estimates],
+                )
+            )
+            self.sample_age.add((time.time_ns() - stamp_ns) * 1e-9)
+            self.handler_time.add(time.perf_counter() - started)
+
+    def _publish_event(self, event: ContactEvent, stamp_ns: int) -> None:
+        """Publish an event of the sample stamped ``stamp_ns`` (the sample that triggered it)."""
         pub = self._event_pubs.get(event.kind)
         if pub is not None:
-            msg = WrenchStamped()
-            msg.header.stamp = s_to_stamp(event.stamp_s)
-            msg.header.frame_id = event.joint
-            msg.wrench.torque.z = event.torque_nm
             arm = self.values["arm_length_m"]
-            if arm > 0:
-                msg.wrench.force.z = event.torque_nm / arm
-            pub.publish(msg)
+            force = event.torque_nm / arm if arm > 0 else 0.0
+            stamp = s_to_stamp(event.stamp_s)
+            pub.publish(
+                encode_wrench_stamped(
+                    stamp.sec,
+                    stamp.nanosec,
+                    event.joint,
+                    (0.0, 0.0, force),
+                    (0.0, 0.0, event.torque_nm),
+                )
+            )
+            if event.kind is not EventKind.RELEASE:
+                self.onset_age.add((time.time_ns() - stamp_ns) * 1e-9)
             self.events_published += 1
         state_pub = self._state_pubs.get(event.joint)
         if state_pub is None:
@@ -241,28 +334,43 @@ class ContactEstimatorNode(Node):
         state_pub.publish(UInt8(data=int(event.level)))
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        self.pipeline.reset()
+        with self.lock:
+            self.pipeline.reset()
+            self.handler_time.reset()
+            self.sample_age.reset()
+            self.onset_age.reset()
         for pub in self._state_pubs.values():
             pub.publish(UInt8(data=0))
-        response.success, response.message = True, "detector state and stamp history cleared"
+        response.success = True
+        response.message = "detector state, stamp history and latency statistics cleared"
         return response
 
     def _publish_diagnostics(self) -> None:
         status = DiagnosticStatus(name=f"{NODE_NAME}: estimator", hardware_id="")
-        arrivals = np.array(self._arrivals)
-        rate = (arrivals.size - 1) / (arrivals[-1] - arrivals[0]) if arrivals.size > 2 else 0.0
-        latency = np.array(self._latency_us) if self._latency_us else np.zeros(1)
-        rejected = sum(self.pipeline.rejected.values())
+        now = time.monotonic()
+        with self.lock:  # snapshots (microseconds); the work below does not hold up the hot path
+            rate = self._period_arrivals / max(now - self._period_start_s, 1e-9)
+            self._period_start_s, self._period_arrivals = now, 0
+            handler = self.handler_time.copy()
+            self.handler_time.reset()
+            rejected_by = dict(sorted(self.pipeline.rejected.items()))
+            samples, events = self.pipeline.samples, self.events_published
+            ages = {"sample_age": self.sample_age.copy(), "onset_age": self.onset_age.copy()}
+        rejected = sum(rejected_by.values())
         status.level = DiagnosticStatus.WARN if rejected else DiagnosticStatus.OK
         status.message = f"{rejected} samples rejected" if rejected else "ok"
         values: dict[str, Any] = {
-            "joint_states_rate_hz": f"{rate:.1f}", "samples": self.pipeline.samples,
-            "rejected_total": rejected, "events_published": self.events_published,
-            "latency_p50_us": f"{np.percentile(latency, 50):.0f}",
-            "latency_p99_us": f"{np.percentile(latency, 99):.0f}",
-            "latency_max_us": f"{latency.max():.0f}",
+            "joint_states_rate_hz": f"{rate:.1f}", "samples": samples,
+            "rejected_total": rejected, "events_published": events,
         }  # fmt: skip
-        values.update({f"rejected_{k}": v for k, v in sorted(self.pipeline.rejected.items())})
+        # the handler's time in this period; the ages since start
+        for key, hist, digits in (("latency", handler, 0), *((k, h, 1) for k, h in ages.items())):
+            if key != "latency":
+                values[f"{key}_count"] = hist.count
+            for q in (50, 99):
+                values[f"{key}_p{q}_us"] = f"{hist.percentile(q) * 1e6:.{digits}f}"
+            values[f"{key}_max_us"] = f"{hist.max_s * 1e6:.{digits}f}"
+        values.update({f"rejected_{k}": v for k, v in rejected_by.items()})
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
