@@ -161,7 +161,7 @@ def _handler_time(periods: list[dict[str, str]]) -> dict[str, float]:
     }
 
 
-def measure(setup: str, rate_hz: float, seconds: float) -> dict[str, Any]:
+def measure(setup: str, rate_hz: float, seconds: float, priority: int = 0) -> dict[str, Any]:
     import rclpy  # noqa: PLC0415
     from diagnostic_msgs.msg import DiagnosticArray  # noqa: PLC0415
     from geometry_msgs.msg import WrenchStamped  # noqa: PLC0415
@@ -181,7 +181,10 @@ def measure(setup: str, rate_hz: float, seconds: float) -> dict[str, Any]:
     proc = None
     if setup == "cross-process":
         proc = start_node(
-            "contact_estimator", ESTIMATOR_PARAMS, extra=["--log-level", "warn"], quiet=True
+            "contact_estimator",
+            {**ESTIMATOR_PARAMS, "hot_path_priority": priority},
+            extra=["--log-level", "warn"],
+            quiet=True,
         )
     else:
         import os  # noqa: PLC0415
@@ -196,7 +199,7 @@ def measure(setup: str, rate_hz: float, seconds: float) -> dict[str, Any]:
     try:
         listener = Node("latency_listener", context=context)
         nodes.append(listener)
-        hot = HotPath(listener)
+        hot = HotPath(listener, priority=priority)
         hot.subscribe(WrenchStamped, "/contact", 1000, rec.on_contact)
         hot.start()
         listener.create_subscription(DiagnosticArray, "/diagnostics", rec.on_diagnostics, 10)
@@ -209,7 +212,11 @@ def measure(setup: str, rate_hz: float, seconds: float) -> dict[str, Any]:
                 context=context,
                 parameter_overrides=[
                     Parameter(k, value=v)
-                    for k, v in {**ESTIMATOR_PARAMS, "in_process": True}.items()
+                    for k, v in {
+                        **ESTIMATOR_PARAMS,
+                        "in_process": True,
+                        "hot_path_priority": priority,
+                    }.items()
                 ],
             )
             nodes.append(estimator)
@@ -273,7 +280,15 @@ def main() -> int:
     parser.add_argument("--rates", type=float, nargs="+", default=[1000.0, 10000.0])
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--setups", nargs="+", default=["cross-process", "one process"])
+    parser.add_argument(
+        "--priority",
+        type=int,
+        default=0,
+        help="SCHED_FIFO priority of the estimator's and the listener's hot-path threads "
+        "(the estimator's hot_path_priority; default 0: normal scheduling)",
+    )
     parser.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    parser.add_argument("--name", default="contact_latency", help="results file name")
     args = parser.parse_args()
     # the source thread and the executor share this interpreter: hand the GIL over quickly
     sys.setswitchinterval(5e-5)
@@ -281,7 +296,8 @@ def main() -> int:
     for setup in args.setups:
         for rate in args.rates:
             print(f"{setup}, {rate:g} Hz for {args.seconds:g} s ...", flush=True)
-            row = measure(setup, rate, args.seconds)
+            row = measure(setup, rate, args.seconds, args.priority)
+            row["priority"] = args.priority
             rows.append(row)
             c, cp, sp = row["contacts"], row["contact_publish"], row["sample_publish"]
             print(
@@ -294,7 +310,9 @@ def main() -> int:
                 flush=True,
             )
     lines = [
-        f"Contact latency through ROS 2, {args.seconds:g} s per case. publish -> publish: from "
+        f"Contact latency through ROS 2, {args.seconds:g} s per case"
+        + (f", hot-path threads at SCHED_FIFO {args.priority}" if args.priority else "")
+        + ". publish -> publish: from "
         "the /joint_states publish to the estimator's publish of the answer, on the "
         "estimator's clock (its /diagnostics, within 1 %); received: to the arrival of /contact "
         "at a listener in the source's process (a second delivery). /contact drops: onsets "
@@ -319,8 +337,9 @@ def main() -> int:
             f"| {sp['median_ms']:.3f} / {sp['p99_ms']:.3f} / {sp['max_ms']:.2f} "
             f"| {cb['p50']:.0f} / {cb['p99']:.0f} / {cb['max']:.0f} |"
         )
-    lines += ["", "(`.venv/bin/python benchmarks/contact_latency.py`)"]
-    write_results(args.out, "contact_latency", lines, rows)
+    command = " ".join(["benchmarks/contact_latency.py", *sys.argv[1:]])
+    lines += ["", f"(`.venv/bin/python {command}`)"]
+    write_results(args.out, args.name, lines, rows)
     return 0
 
 

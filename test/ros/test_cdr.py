@@ -14,6 +14,7 @@ from sensor_msgs.msg import JointState
 
 from transparency_ros.core.cdr import (
     CdrError,
+    JointStateReader,
     decode_joint_state,
     encode_joint_state,
     encode_wrench_stamped,
@@ -100,3 +101,43 @@ def test_arbitrary_bytes_decode_or_cdr_error(garbage: bytes, cut: int) -> None:
             assert str(err)  # noqa: PT017 - the message names the field and offset
         else:
             assert isinstance(got.name, list)
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            stamps,
+            st.sampled_from(["", "base"]),
+            st.sampled_from([["j"], ["j", "k"], []]),
+            st.integers(0, 2),
+            st.integers(0, 2),
+            floats,
+        ),
+        min_size=1,
+        max_size=12,
+    ),
+    st.booleans(),
+)
+def test_stream_reader_equals_full_decoding(messages, through_rclpy) -> None:  # type: ignore[no-untyped-def]
+    """Streams that keep or change their layout, from our encoder or rclpy's (whose padding
+    bytes are not zeroed): the cached layout must never leak into a different message."""
+    reader = JointStateReader()
+    for stamp, frame, names, n_velocity, n_effort, value in messages:
+        positions = [value + i for i in range(len(names))]
+        args = {
+            "position": positions,
+            "velocity": [value] * n_velocity,
+            "effort": [-value] * n_effort,
+        }
+        if through_rclpy:
+            msg = JointState(name=names, **args)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
+            msg.header.frame_id = frame
+            data = serialize_message(msg)
+        else:
+            data = encode_joint_state(*stamp, frame, names, **args)
+        got, want = reader(data), decode_joint_state(data)
+        assert got[:4] == want[:4]
+        for a, b in zip(got[4:], want[4:], strict=True):
+            assert _same(a, b)

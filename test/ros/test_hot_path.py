@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 import rclpy
 from rclpy.context import Context
@@ -60,3 +62,25 @@ def test_the_thread_ends_when_the_context_shuts_down() -> None:
     assert hot._thread is not None
     hot._thread.join(timeout=2.0)
     assert not hot._thread.is_alive()
+
+
+def test_priority_is_sched_fifo_or_a_stated_refusal(ros_context: Context) -> None:
+    node = Node("hot_path_priority", context=ros_context)
+    hot = HotPath(node, priority=10)
+    hot.subscribe(JointState, "/hot_path_priority", 10, lambda data: None)
+    hot.start()
+    try:
+        assert hot._thread is not None
+        assert wait_for(lambda: hot._thread.native_id is not None)  # type: ignore[union-attr]
+        native = hot._thread.native_id
+        assert native is not None
+        assert wait_for(
+            lambda: hot.priority_error or os.sched_getscheduler(native) == os.SCHED_FIFO
+        )
+        if hot.priority_error:  # without CAP_SYS_NICE or an rtprio limit
+            assert "SCHED_FIFO 10 refused" in hot.priority_error
+        else:
+            assert os.sched_getparam(native).sched_priority == 10
+    finally:
+        hot.stop()
+        node.destroy_node()

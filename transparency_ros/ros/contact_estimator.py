@@ -47,7 +47,7 @@ from std_srvs.srv import Trigger
 from transparency_ros.core.cdr import (
     CdrError,
     JointStateFields,
-    decode_joint_state,
+    JointStateReader,
     encode_joint_state,
     encode_wrench_stamped,
 )
@@ -135,6 +135,15 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         high=100000,
     ),
     P(
+        "hot_path_priority",
+        0,
+        "SCHED_FIFO priority (1-99) of the thread serving /joint_states; 0: normal scheduling. "
+        "Needs CAP_SYS_NICE or an rtprio limit; refused, the node warns and runs as normal",
+        read_only=True,
+        low=0,
+        high=99,
+    ),
+    P(
         "in_process",
         False,
         "take /joint_states only from a source composed into this process (ros.in_process: "
@@ -189,12 +198,14 @@ class ContactEstimatorNode(Node):
         self._period_start_s = time.monotonic()
         self._period_arrivals = 0
         self.handler_time = DurationHistogram()
-        # since start (or ~/reset): wall-clock time at publish - the sample's stamp (meaningful
-        # when the source stamps with this machine's clock), of every estimate and every onset
+        # since start (or ~/reset): wall-clock time at the publish call - the sample's stamp
+        # (meaningful when the source stamps with this machine's clock, as the driver does), of
+        # every estimate and every onset
         self.sample_age = DurationHistogram()
         self.onset_age = DurationHistogram()
         self._last_warn_s = -math.inf
-        self.hot_path = HotPath(self)
+        self._reader = JointStateReader()
+        self.hot_path = HotPath(self, priority=self.values["hot_path_priority"])
         self._leave_in_process = None
         if self.values["in_process"]:
             self._leave_in_process = in_process.subscribe(
@@ -259,14 +270,14 @@ class ContactEstimatorNode(Node):
             self._warn(f"rejected /joint_commands: {err}")
 
     def _decode(self, data: bytes) -> JointStateFields | None:
+        """Called with ``self.lock`` held (the reader keeps the stream's layout)."""
         try:
-            return decode_joint_state(data)
+            return self._reader(data)
         except CdrError as fast_error:
             try:  # what core.cdr does not read (big-endian CDR): rclpy's deserializer
                 msg = deserialize_message(data, JointState)
             except Exception:  # noqa: BLE001 - any failure means the bytes are not a JointState
-                with self.lock:
-                    self.pipeline.reject("undecodable", str(fast_error))
+                self.pipeline.reject("undecodable", str(fast_error))
                 self._warn(f"rejected /joint_states: not a JointState ({fast_error})")
                 return None
         stamp = msg.header.stamp
@@ -277,11 +288,11 @@ class ContactEstimatorNode(Node):
 
     def _on_state_bytes(self, data: bytes) -> None:
         started = time.perf_counter()
-        sample = self._decode(data)
-        if sample is None:
-            return
-        stamp_ns = sample.sec * 1_000_000_000 + sample.nanosec
         with self.lock:
+            sample = self._decode(data)
+            if sample is None:
+                return
+            stamp_ns = sample.sec * 1_000_000_000 + sample.nanosec
             self._period_arrivals += 1
             try:
                 estimates, events = self.pipeline.sample(
@@ -295,17 +306,17 @@ class ContactEstimatorNode(Node):
                 return
             for event in events:  # first: a behavior waits for them
                 self._publish_event(event, stamp_ns)
-            self._estimate_pub.publish(
-                encode_joint_state(
-                    sample.sec,
-                    sample.nanosec,
-                    "",
-                    [e.joint for e in estimates],
-                    position=[e.error_rad for e in estimates],
-                    effort=[e.torque_nm for e in estimates],
-                )
+            data = encode_joint_state(
+                sample.sec,
+                sample.nanosec,
+                "",
+                [e.joint for e in estimates],
+                position=[e.error_rad for e in estimates],
+                effort=[e.torque_nm for e in estimates],
             )
+            # the age at the publish call, as the source's stamp is (delivery is after both)
             self.sample_age.add((time.time_ns() - stamp_ns) * 1e-9)
+            self._estimate_pub.publish(data)
             self.handler_time.add(time.perf_counter() - started)
 
     def _publish_event(self, event: ContactEvent, stamp_ns: int) -> None:
@@ -315,17 +326,16 @@ class ContactEstimatorNode(Node):
             arm = self.values["arm_length_m"]
             force = event.torque_nm / arm if arm > 0 else 0.0
             stamp = s_to_stamp(event.stamp_s)
-            pub.publish(
-                encode_wrench_stamped(
-                    stamp.sec,
-                    stamp.nanosec,
-                    event.joint,
-                    (0.0, 0.0, force),
-                    (0.0, 0.0, event.torque_nm),
-                )
+            data = encode_wrench_stamped(
+                stamp.sec,
+                stamp.nanosec,
+                event.joint,
+                (0.0, 0.0, force),
+                (0.0, 0.0, event.torque_nm),
             )
             if event.kind is not EventKind.RELEASE:
                 self.onset_age.add((time.time_ns() - stamp_ns) * 1e-9)
+            pub.publish(data)
             self.events_published += 1
         state_pub = self._state_pubs.get(event.joint)
         if state_pub is None:
@@ -357,11 +367,18 @@ class ContactEstimatorNode(Node):
             samples, events = self.pipeline.samples, self.events_published
             ages = {"sample_age": self.sample_age.copy(), "onset_age": self.onset_age.copy()}
         rejected = sum(rejected_by.values())
-        status.level = DiagnosticStatus.WARN if rejected else DiagnosticStatus.OK
-        status.message = f"{rejected} samples rejected" if rejected else "ok"
+        problems = [f"{rejected} samples rejected"] if rejected else []
+        if self.hot_path.priority_error:
+            problems.append(self.hot_path.priority_error)
+        status.level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
+        status.message = "; ".join(problems) or "ok"
         values: dict[str, Any] = {
             "joint_states_rate_hz": f"{rate:.1f}", "samples": samples,
             "rejected_total": rejected, "events_published": events,
+            "hot_path_scheduling": (
+                f"SCHED_FIFO {self.hot_path.priority}"
+                if self.hot_path.priority and not self.hot_path.priority_error else "normal"
+            ),
         }  # fmt: skip
         # the handler's time in this period; the ages since start
         for key, hist, digits in (("latency", handler, 0), *((k, h, 1) for k, h in ages.items())):

@@ -22,6 +22,7 @@ rclpy (Jazzy) has no public wait-set class; the thread uses the one its executor
 from __future__ import annotations
 
 import contextlib
+import os
 import threading
 import time
 import traceback
@@ -57,8 +58,10 @@ class HotPath:
     """Raw subscriptions of ``node`` served by one thread; :meth:`start` after adding them,
     :meth:`stop` before destroying the node (also done when the context shuts down)."""
 
-    def __init__(self, node: Node) -> None:
+    def __init__(self, node: Node, priority: int = 0) -> None:
         self.node = node
+        self.priority = priority  # SCHED_FIFO priority of the thread (0: normal scheduling)
+        self.priority_error = ""  # why the priority could not be set
         self.group = Unserved()
         self._subs: list[tuple[Any, Handler]] = []
         self._wake = GuardCondition(None, None, context=node.context)
@@ -93,7 +96,16 @@ class HotPath:
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=5.0)
 
+    def _set_priority(self) -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.priority))
+        except (OSError, AttributeError) as err:  # no CAP_SYS_NICE / rtprio limit; not Linux
+            self.priority_error = f"SCHED_FIFO {self.priority} refused ({err}); normal scheduling"
+            self.node.get_logger().warning(f"hot path: {self.priority_error}")
+
     def _run(self) -> None:
+        if self.priority > 0:
+            self._set_priority()
         context = self.node.context
         wait_set = None
         while not self._stopping.is_set() and context.ok():
