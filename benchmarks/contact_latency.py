@@ -8,8 +8,8 @@ deflection of 0.2 rad for 5 samples in every 50, so the estimator (contact_onset
 release 0.05) reports a contact onset every 50 samples.
 
 Two latencies per answer:
-* **publish -> publish**, what the issue asks for: the estimator notes, at the moment it
-  publishes /contact (and /estimated_effort), the wall-clock time minus the sample's stamp, in
+* **publish -> publish**, what the issue asks for: the estimator notes, at its publish call
+  for /contact (and /estimated_effort), the wall-clock time minus the sample's stamp, in
   a histogram it reports on /diagnostics (``onset_age_*``, ``sample_age_*``; within 1 %). The
   benchmark clears it (``~/reset``) after the start-up probe and reads it after the run.
 * **received**: the arrival of /contact at a listener in this process (its own thread,
@@ -20,9 +20,11 @@ Two latencies per answer:
 
 Two set-ups:
 * **cross-process**: `contact_estimator` runs as its own process (what `ros2 run` does);
-* **one process**: the estimator node is composed into this process, on the executor the
-  listener uses (rclpy's SingleThreadedExecutor; /joint_states is served by the node's own
-  hot-path thread in both set-ups).
+* **one process**: the estimator node is composed into this process (on the listener's
+  SingleThreadedExecutor) with ``in_process:=true``: the source hands it each sample directly,
+  as the driver does (``ros.in_process``), and publishes it through DDS as well.
+
+``--priority N`` runs the estimator's and the listener's hot-path threads at SCHED_FIFO N.
 
 Every ROS process runs on loopback with a domain ID of its own. Writes
 benchmarks/results/contact_latency.md and .json.
@@ -84,32 +86,29 @@ def _stamp_of(data: bytes) -> int:
 
 class Source:
     """/joint_states at ``rate_hz`` from a thread: waits for each period's start (sleeping, so
-    the GIL is free), stamps with the wall clock and publishes the serialized message at once.
-    A deflection of 0.2 rad for 5 samples in every 50 (none while ``deflect`` is False)."""
+    the GIL is free), then stamps with the wall clock and publishes at once: the message is
+    serialized beforehand and only its stamp written in, so the stamp is the publish call's
+    time, as the estimator's is. A deflection of 0.2 rad for 5 samples in every 50."""
 
     def __init__(self, publish: Any) -> None:
         self.publish = publish
         self.sent: list[int] = []
+        self.templates = [
+            bytearray(encode_joint_state(0, 0, "", ["joint"], position=[p], velocity=[0.0]))
+            for p in (0.0, 0.2)
+        ]
 
-    def run(self, rate_hz: float, seconds: float, deflect: bool = True) -> None:
+    def run(self, rate_hz: float, seconds: float) -> None:
         period = 1.0 / rate_hz
         start = time.perf_counter() + 0.2
         for i in range(int(seconds * rate_hz)):
             delay = start + i * period - time.perf_counter()
             if delay > 0:
                 time.sleep(delay)
-            deflected = deflect and i % PERIOD_SAMPLES < DEFLECTED_SAMPLES
+            message = self.templates[i % PERIOD_SAMPLES < DEFLECTED_SAMPLES]
             t_ns = time.time_ns()
-            self.publish(
-                encode_joint_state(
-                    t_ns // 1_000_000_000,
-                    t_ns % 1_000_000_000,
-                    "",
-                    ["joint"],
-                    position=[0.2 if deflected else 0.0],
-                    velocity=[0.0],
-                )
-            )
+            STAMP.pack_into(message, 4, t_ns // 1_000_000_000, t_ns % 1_000_000_000)
+            self.publish(bytes(message))
             self.sent.append(t_ns)
 
 

@@ -306,7 +306,7 @@ class ContactEstimatorNode(Node):
                 return
             for event in events:  # first: a behavior waits for them
                 self._publish_event(event, stamp_ns)
-            data = encode_joint_state(
+            out = encode_joint_state(
                 sample.sec,
                 sample.nanosec,
                 "",
@@ -316,7 +316,7 @@ class ContactEstimatorNode(Node):
             )
             # the age at the publish call, as the source's stamp is (delivery is after both)
             self.sample_age.add((time.time_ns() - stamp_ns) * 1e-9)
-            self._estimate_pub.publish(data)
+            self._estimate_pub.publish(out)
             self.handler_time.add(time.perf_counter() - started)
 
     def _publish_event(self, event: ContactEvent, stamp_ns: int) -> None:
