@@ -74,6 +74,7 @@ class ControlLoop:
         self.cycles = 0
         self.overruns = 0
         self._last_sample_s = -math.inf
+        self._last_rx_wall_s = -math.inf  # bus time of the newest reply handed on
 
     # ----------------------------------------------------------------- control
 
@@ -141,11 +142,17 @@ class ControlLoop:
 
     def _late(self, feedback: Feedback, rx_wall_s: float | None, ref_s: float, ref_wall_s: float,
               samples: list[tuple[Feedback, float]]) -> None:  # fmt: skip
-        """A reply that missed its cycle: hand it on at its bus time (dropped when unknown)."""
+        """A reply that missed its cycle: hand it on at its bus time (dropped when unknown).
+        One whose bus time was handed on already is a copy (a device repeating itself, a reply
+        storm): counted and dropped."""
+        if rx_wall_s is not None and rx_wall_s <= self._last_rx_wall_s:
+            self.client.counters.duplicates += 1
+            return
         self.client.counters.late += 1
         if rx_wall_s is not None and abs(rx_wall_s - ref_wall_s) < 1.0:
             samples.append((feedback, ref_s + (rx_wall_s - ref_wall_s)))
-            self.core.on_feedback(feedback.position_rad)
+            self._last_rx_wall_s = rx_wall_s
+            self.core.on_feedback(feedback.position_rad, in_time=False)
 
     def cycle(self) -> None:
         """One cycle; the loop thread runs it every period (tests may call it directly)."""
@@ -171,6 +178,8 @@ class ControlLoop:
                 if feedback is not None:
                     latency = 0.0 if rx is None else min(rx - sent_wall_s, self.period_s)
                     samples.append((feedback, sent_s + latency))
+                    if rx is not None:
+                        self._last_rx_wall_s = max(self._last_rx_wall_s, rx)
                     self.core.on_feedback(feedback.position_rad)
                 elif self.core.on_missed_reply():
                     self.client.send(self.client.protocol.disable_frames())

@@ -15,13 +15,14 @@ stops all replies, as a cut cable or a dead controller would.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
 from abc import ABC, abstractmethod
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import can
 
@@ -333,6 +334,18 @@ class _OffsetLaw:
         return self.law(position - self.offset_rad, velocity)
 
 
+@dataclass
+class DeviceFaults:
+    """What the simulated device does wrong, on the wire, as a real device or its bus can
+    (issue 8's fault injection). Change the fields of :attr:`SimulatedActuator.faults` while
+    it runs; :meth:`SimulatedActuator.inject` puts arbitrary frames on the bus."""
+
+    reply_copies: int = 1  # 2: every reply duplicated; 20: a reply storm
+    reply_delay_s: float = 0.0  # every reply goes on the wire this much later (the device keeps up)
+    refuse_enable: bool = False  # never enters motor mode: while disabled it ignores every frame
+    error_frames: int = 0  # error frames (a controller in trouble) sent with every reply
+
+
 class SimulatedActuator:
     """A device on the bus: its own python-can bus object, a thread, the physics."""
 
@@ -361,6 +374,10 @@ class SimulatedActuator:
         self.start_monotonic_s = 0.0
         self.replies_sent = 0
         self.frames_received = 0
+        self.faults = DeviceFaults()
+        self.last_reply: Frame | None = None  # the newest reply frame the device sent
+        self._injected: list[can.Message] = []
+        self._delayed: list[tuple[float, can.Message]] = []  # (due on the clock, message)
 
     def start(self) -> SimulatedActuator:
         if self._thread is not None:
@@ -396,6 +413,12 @@ class SimulatedActuator:
         else:
             self._silent.clear()
 
+    def inject(self, *frames: Frame | can.Message) -> None:
+        """Send these frames from the device's bus on its next turn (garbage, unknown ids, wrong
+        lengths, error frames: ``can.Message(is_error_frame=True)``)."""
+        with self.lock:
+            self._injected += [f if isinstance(f, can.Message) else to_message(f) for f in frames]
+
     @property
     def events(self) -> Counter[str]:
         with self.lock:
@@ -419,10 +442,14 @@ class SimulatedActuator:
         bus = self._bus
         assert bus is not None
         while not self._stop.is_set():
+            wait = self.idle_tick_s
+            if self._delayed:
+                wait = min(wait, max(0.0, self._delayed[0][0] - self.clock()))
             try:
-                msg = bus.recv(timeout=self.idle_tick_s)
+                msg = bus.recv(timeout=wait)
             except (can.CanError, OSError):
                 continue
+            self._send_due(bus)
             with self.lock:
                 now = self.clock()
                 if msg is not None:  # act at the frame's bus time (it may have waited for us)
@@ -432,16 +459,43 @@ class SimulatedActuator:
                 self.advance_to(now)
                 if msg is not None:
                     self.frames_received += 1
-                out = self.personality.handle(to_frame(msg), self.physics, now) if msg else []
+                faults = self.faults
+                ignoring = faults.refuse_enable and not self.personality.is_enabled()
+                out = (
+                    self.personality.handle(to_frame(msg), self.physics, now)
+                    if msg is not None and not ignoring
+                    else []
+                )
                 out += self.personality.tick(self.physics, now)
-            if self._silent.is_set():
+                injected, self._injected = self._injected, []
+            for message in injected:
+                with contextlib.suppress(can.CanError, OSError):
+                    bus.send(message)
+            if self._silent.is_set() or not out:
                 continue
-            sent_at = WALL(now)  # the bus time of ``now``
-            for frame in out:
+            due = now + faults.reply_delay_s
+            sent_at = WALL(due)  # the bus time the replies go on the wire
+            extra = [can.Message(is_error_frame=True, timestamp=sent_at)] * faults.error_frames
+            for frame in out * max(1, faults.reply_copies):
                 message = to_message(frame)
                 message.timestamp = sent_at
+                self.last_reply = frame
+                if faults.reply_delay_s > 0:
+                    self._delayed.append((due, message))
+                    continue
                 try:
                     bus.send(message)
                     self.replies_sent += 1
                 except (can.CanError, OSError):
                     continue
+            for message in extra:
+                with contextlib.suppress(can.CanError, OSError):
+                    bus.send(message)
+
+    def _send_due(self, bus: can.BusABC) -> None:
+        now = self.clock()
+        while self._delayed and self._delayed[0][0] <= now:
+            _, message = self._delayed.pop(0)
+            with contextlib.suppress(can.CanError, OSError):
+                bus.send(message)
+                self.replies_sent += 1

@@ -668,6 +668,7 @@ class ActuatorDriverNode(LifecycleNode):
                 rx_errors=c.rx_errors,
                 timeouts=s.missed_replies_total,
                 late_replies=c.late,
+                duplicate_replies=c.duplicates,
                 malformed=c.malformed,
                 other_frames=c.other,
                 last_bus_error=c.last_error,

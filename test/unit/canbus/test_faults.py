@@ -1,0 +1,156 @@
+"""CAN faults injected at the simulated device, for each protocol: detected, counted, safe.
+
+The device misbehaves on the wire (``SimulatedActuator.faults`` and ``inject``): duplicated
+replies, reply storms, replies later than the loop's timeout, frames of the wrong length,
+unknown ids, error frames, a motor that never enters motor mode. The loop must keep publishing
+valid samples in time order, count what it could not use, trip the fault (and send the safe
+command) within the configured missed replies when no usable reply comes, and recover once the
+device behaves again.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Iterator
+
+import can
+import pytest
+
+from test.unit.canbus.test_loop_with_sim import EXIT_EVENT, make, wait_for
+from transparency_ros.canbus.client import ActuatorClient, BusSettings
+from transparency_ros.canbus.loop import ControlLoop
+from transparency_ros.canbus.protocol import Feedback, Frame
+from transparency_ros.canbus.sim_device import SimulatedActuator
+from transparency_ros.core.actuator_physics import ActuatorPhysics, PhysicsParams
+from transparency_ros.core.config import get_actuator
+from transparency_ros.core.driver import DriverCore, DriverMode, DriverSettings
+
+_channels = itertools.count()
+MAX_MISSED = 4
+
+
+class Rig:
+    def __init__(self, name: str, rate_hz: float = 500.0) -> None:
+        self.name = name
+        protocol, personality = make(name)
+        settings = BusSettings(channel=f"fault_test_{next(_channels)}", fd=protocol.is_fd)
+        physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
+        self.sim = SimulatedActuator(physics, personality, settings).start()
+        self.client = ActuatorClient(protocol, settings.open())
+        core = DriverCore(DriverSettings(max_missed_replies=MAX_MISSED))
+        self.loop = ControlLoop(self.client, core, rate_hz=rate_hz, reply_timeout_s=0.0015)
+        self.published: list[float] = []
+        self.faults: list[str] = []
+        self.loop.on_sample = self._on_sample
+        self.loop.on_fault = self.faults.append
+
+    def _on_sample(self, sample: Feedback, at_s: float) -> None:
+        self.published.append(at_s)
+
+    def run(self) -> None:
+        assert self.loop.enable() is not None
+        self.loop.start()
+        assert wait_for(lambda: self.client.counters.samples > 20)
+
+    def exits(self) -> int:
+        return self.sim.events[EXIT_EVENT[self.name]]
+
+    def close(self) -> None:
+        self.loop.stop()
+        self.loop.disable()
+        self.client.close()
+        self.sim.stop()
+
+
+PROTOCOLS = ["mit", "odrive", "moteus"]
+
+
+@pytest.fixture(params=PROTOCOLS)
+def rig(request: pytest.FixtureRequest) -> Iterator[Rig]:
+    r = Rig(request.param)
+    yield r
+    r.close()
+
+
+def _in_time_order(times: list[float]) -> bool:
+    return all(b > a for a, b in itertools.pairwise(times))
+
+
+@pytest.mark.parametrize("copies", [2, 20], ids=["duplicated", "storm"])
+def test_duplicated_replies_and_storms_are_not_published_twice(rig: Rig, copies: int) -> None:
+    rig.run()
+    c = rig.client.counters
+    duplicates, samples = c.duplicates, c.samples
+    published, cycles = len(rig.published), rig.loop.cycles
+    rig.sim.faults.reply_copies = copies
+    time.sleep(0.3)
+    rig.sim.faults.reply_copies = 1
+    time.sleep(0.05)
+    assert rig.loop.core.mode is DriverMode.ACTIVE and rig.faults == []
+    # every copy beyond the first is read, counted and not handed on: one sample per reply
+    got = c.samples - samples
+    assert c.duplicates - duplicates >= (copies - 1) * 0.9 * (got / copies) > 0
+    assert len(rig.published) - published <= rig.loop.cycles - cycles
+    assert _in_time_order(rig.published)
+
+
+@pytest.mark.parametrize("name", PROTOCOLS)
+def test_replies_later_than_the_timeout_trip_the_fault_and_recovery_follows(name: str) -> None:
+    rig = Rig(name, rate_hz=250.0)  # 4 ms cycles, of which the loop waits 1.5 ms for the reply
+    try:
+        _late_replies(rig)
+    finally:
+        rig.close()
+
+
+def _late_replies(rig: Rig) -> None:
+    rig.run()
+    exits, late = rig.exits(), rig.client.counters.late
+    rig.sim.faults.reply_delay_s = 0.0025  # after the wait, before the next cycle
+    assert wait_for(lambda: rig.loop.core.mode is DriverMode.FAULT)
+    assert rig.faults == [f"{MAX_MISSED} replies missed in a row"]
+    assert rig.loop.core.status.missed_replies_in_row == MAX_MISSED
+    assert wait_for(lambda: rig.exits() > exits)  # the safe command reached the device
+    assert rig.client.counters.late - late >= MAX_MISSED - 1  # drained in the next cycle
+    assert _in_time_order(rig.published)  # late replies: at their bus time, or not at all
+    rig.sim.faults.reply_delay_s = 0.0
+    time.sleep(0.05)
+    assert rig.loop.enable() is not None and rig.loop.core.mode is DriverMode.ACTIVE
+    assert wait_for(lambda: rig.loop.core.status.missed_replies_in_row == 0)
+
+
+def test_wrong_lengths_unknown_ids_and_error_frames_are_counted_exactly(rig: Rig) -> None:
+    rig.run()
+    reply = rig.sim.last_reply
+    assert reply is not None
+    c = rig.client.counters
+    malformed, other, rx_errors = c.malformed, c.other, c.rx_errors
+    short = Frame(reply.arbitration_id, reply.data[:2], reply.is_fd, False, reply.is_extended_id)
+    unknown = Frame(0x555, bytes(8))
+    error = can.Message(is_error_frame=True)
+    rig.sim.inject(short, short, short, unknown, unknown, error)
+    rig.sim.faults.error_frames = 1
+    time.sleep(0.1)
+    rig.sim.faults.error_frames = 0
+    samples = c.samples
+    time.sleep(0.1)
+    assert c.malformed - malformed == 3
+    if rig.name == "odrive":  # its heartbeats and partial replies count here as well
+        assert c.other - other >= 2
+    else:
+        assert c.other - other == 2
+    assert c.rx_errors - rx_errors >= 1 + 20  # the injected one and one per reply for 0.1 s
+    assert rig.loop.core.mode is DriverMode.ACTIVE and rig.faults == []
+    assert c.samples > samples + 20  # valid replies still make samples
+    assert "malformed frame" in c.last_error
+
+
+def test_a_motor_that_never_enters_motor_mode_is_refused_then_enabled(rig: Rig) -> None:
+    rig.sim.faults.refuse_enable = True
+    assert rig.loop.enable(timeout_s=0.05) is None
+    assert rig.loop.core.mode is DriverMode.FAULT
+    assert rig.loop.core.status.fault_reason == "no reply to enable"
+    assert not rig.sim.personality.is_enabled()
+    rig.sim.faults.refuse_enable = False
+    assert rig.loop.enable() is not None and rig.loop.core.mode is DriverMode.ACTIVE
