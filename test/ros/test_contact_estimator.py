@@ -151,6 +151,9 @@ def test_bad_samples_are_rejected_counted_and_the_node_goes_on(rig_factory: Any)
     rig.send(10.000, 0.0)  # duplicated stamp
     rig.states_pub.publish(b"\x00\x01\x00\x00\x05\x00")  # bytes, not a JointState
     rig.states_pub.publish(b"")
+    rig.send(10.0015, 1e308)  # finite, but tau_hat = k_s * error overflows
+    rig.states_pub.publish(JointState(name=[], position=[]))  # empty
+    rig.states_pub.publish(JointState(name=["arm"], position=[]))  # no positions
     rig.send(10.003, -0.2)  # valid: a contact
     assert wait_for(lambda: len(rig.contacts) == 1)
     rejected = rig.node.pipeline.rejected
@@ -160,9 +163,12 @@ def test_bad_samples_are_rejected_counted_and_the_node_goes_on(rig_factory: Any)
         "length_mismatch": 1,
         "stamp_not_increasing": 2,
         "undecodable": 2,
+        "out_of_range": 1,
+        "no_names": 1,
+        "no_position": 1,
     }
     assert wait_for(
-        lambda: bool(rig.diagnostics) and rig.diagnostics[-1]["rejected_total"] == "7",
+        lambda: bool(rig.diagnostics) and rig.diagnostics[-1]["rejected_total"] == "10",
         timeout_s=3.0,
     )
     d = rig.diagnostics[-1]

@@ -19,7 +19,9 @@ from transparency_ros.core.estimator import (
     DetectorSettings,
     EstimatorError,
     EstimatorGains,
+    EstimatorPipeline,
     EventKind,
+    SampleRejectedError,
     SchmittDetector,
     estimate_torque,
     propose_thresholds,
@@ -151,3 +153,14 @@ def test_comparison_on_the_same_data() -> None:
     assert len(observer.delays_s) > len(position.delays_s)
     assert observer.median_delay_s < 0.02
     assert all(0 <= d <= 0.03 for d in position.delays_s + observer.delays_s)
+
+
+def test_a_sample_is_taken_whole_or_not_at_all() -> None:
+    """Two joints, the second overflowing tau_hat: rejected, and the first joint's state (its
+    last stamp, its detector) is not touched either."""
+    pipeline = EstimatorPipeline()
+    with pytest.raises(SampleRejectedError, match="overflows"):
+        pipeline.sample(1.0, ["a", "b"], [-0.5, 1e308], [])
+    assert pipeline.rejected == {"out_of_range": 1} and pipeline.samples == 0
+    estimates, events = pipeline.sample(1.0, ["a", "b"], [-0.5, 0.0], [])  # same stamp: fine
+    assert [e.joint for e in estimates] == ["a", "b"] and [e.joint for e in events] == ["a"]

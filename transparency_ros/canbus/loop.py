@@ -152,7 +152,7 @@ class ControlLoop:
         if rx_wall_s is not None and abs(rx_wall_s - ref_wall_s) < 1.0:
             samples.append((feedback, ref_s + (rx_wall_s - ref_wall_s)))
             self._last_rx_wall_s = rx_wall_s
-            self.core.on_feedback(feedback.position_rad, in_time=False)
+            self.core.on_feedback(feedback.position_rad)
 
     def cycle(self) -> None:
         """One cycle; the loop thread runs it every period (tests may call it directly)."""

@@ -239,12 +239,8 @@ class DriverCore:
         self.status.commands_rejected += 1
         self.status.last_rejection = reason
 
-    def on_feedback(self, position_rad: float, *, in_time: bool = True) -> None:
-        """A reply. One that missed its cycle (``in_time`` False) still tells the position but
-        does not end a run of missed replies: a device that always answers late trips the fault
-        as a silent one does."""
-        if in_time:
-            self.status.missed_replies_in_row = 0
+    def on_feedback(self, position_rad: float) -> None:
+        self.status.missed_replies_in_row = 0
         self.last_position_rad = position_rad
 
     def on_missed_reply(self) -> bool:

@@ -381,11 +381,8 @@ class EstimatorPipeline:
             last = self._last_stamp.get(name)
             if last is not None and stamp_s <= last:
                 raise self.reject("stamp_not_increasing", f"{name}: {stamp_s:.9f} after {last:.9f}")
-        self.samples += 1
         estimates: list[JointEstimate] = []
-        events: list[ContactEvent] = []
         for i, name in enumerate(names):
-            self._last_stamp[name] = stamp_s
             theta_d, theta_d_dot, command_stamp = self._commands.get(
                 name, (self.default_theta_d_rad, 0.0, None)
             )
@@ -394,8 +391,17 @@ class EstimatorPipeline:
             velocity = velocities[i] if velocities else 0.0
             error = theta_d - positions[i]
             torque = self.gains.torque(theta_d, positions[i], theta_d_dot, velocity)
+            if not (math.isfinite(error) and math.isfinite(torque)):  # finite, but too large
+                raise self.reject("out_of_range", f"{name}: the estimate overflows ({torque})")
             estimates.append(JointEstimate(name, stamp_s, error, torque))
-            events += self.detector.update(name, stamp_s, error, torque)
+        # only a sample accepted whole changes the state
+        self.samples += 1
+        events: list[ContactEvent] = []
+        for estimate in estimates:
+            self._last_stamp[estimate.joint] = stamp_s
+            events += self.detector.update(
+                estimate.joint, stamp_s, estimate.error_rad, estimate.torque_nm
+            )
         return estimates, events
 
     def reset(self) -> None:

@@ -24,8 +24,10 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
+from rclpy.utilities import ok as context_ok
 from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool, Trigger
@@ -708,6 +710,11 @@ def main(args: list[str] | None = None) -> int:
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except _rclpy.RCLError:
+        # a signal can shut the context down while a MultiThreadedExecutor worker rebuilds its
+        # wait set ("the given context is not valid"): that is the same shutdown, not a failure
+        if context_ok():
+            raise
     except (CanProtocolError, TransparencyError) as err:
         print(f"{NODE_NAME}: error: {err}", file=sys.stderr)  # noqa: T201
         return 2

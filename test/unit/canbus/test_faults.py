@@ -4,8 +4,8 @@ The device misbehaves on the wire (``SimulatedActuator.faults`` and ``inject``):
 replies, reply storms, replies later than the loop's timeout, frames of the wrong length,
 unknown ids, error frames, a motor that never enters motor mode. The loop must keep publishing
 valid samples in time order, count what it could not use, trip the fault (and send the safe
-command) within the configured missed replies when no usable reply comes, and recover once the
-device behaves again.
+command) within the configured missed replies when no reply comes (``test_loop_with_sim``), and
+recover once the device behaves again.
 """
 
 from __future__ import annotations
@@ -96,28 +96,24 @@ def test_duplicated_replies_and_storms_are_not_published_twice(rig: Rig, copies:
 
 
 @pytest.mark.parametrize("name", PROTOCOLS)
-def test_replies_later_than_the_timeout_trip_the_fault_and_recovery_follows(name: str) -> None:
+def test_replies_later_than_the_wait_are_published_at_their_bus_time(name: str) -> None:
+    """Every reply after the loop's wait: each cycle counts a miss, and the reply, drained in the
+    next cycle, is handed on at its bus time and shows the motor is alive (a loaded machine makes
+    many replies late; the driver must not stop for that), so no fault."""
     rig = Rig(name, rate_hz=250.0)  # 4 ms cycles, of which the loop waits 1.5 ms for the reply
     try:
-        _late_replies(rig)
+        rig.run()
+        c, status = rig.client.counters, rig.loop.core.status
+        late, missed, published = c.late, status.missed_replies_total, len(rig.published)
+        rig.sim.faults.reply_delay_s = 0.0025  # after the wait, before the next cycle
+        time.sleep(0.3)
+        rig.sim.faults.reply_delay_s = 0.0
+        assert status.missed_replies_total - missed >= 50  # about 75 cycles
+        assert c.late - late >= 50
+        assert rig.loop.core.mode is DriverMode.ACTIVE and rig.faults == []
+        assert len(rig.published) - published >= 50 and _in_time_order(rig.published)
     finally:
         rig.close()
-
-
-def _late_replies(rig: Rig) -> None:
-    rig.run()
-    exits, late = rig.exits(), rig.client.counters.late
-    rig.sim.faults.reply_delay_s = 0.0025  # after the wait, before the next cycle
-    assert wait_for(lambda: rig.loop.core.mode is DriverMode.FAULT)
-    assert rig.faults == [f"{MAX_MISSED} replies missed in a row"]
-    assert rig.loop.core.status.missed_replies_in_row == MAX_MISSED
-    assert wait_for(lambda: rig.exits() > exits)  # the safe command reached the device
-    assert rig.client.counters.late - late >= MAX_MISSED - 1  # drained in the next cycle
-    assert _in_time_order(rig.published)  # late replies: at their bus time, or not at all
-    rig.sim.faults.reply_delay_s = 0.0
-    time.sleep(0.05)
-    assert rig.loop.enable() is not None and rig.loop.core.mode is DriverMode.ACTIVE
-    assert wait_for(lambda: rig.loop.core.status.missed_replies_in_row == 0)
 
 
 def test_wrong_lengths_unknown_ids_and_error_frames_are_counted_exactly(rig: Rig) -> None:
