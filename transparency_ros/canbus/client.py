@@ -85,7 +85,7 @@ class BusCounters:
     other: int = 0  # frames that complete no sample: other nodes, heartbeats, partial replies
     samples: int = 0
     late: int = 0  # replies that came after their cycle's timeout (still published)
-    duplicates: int = 0  # replies with a bus time already handed on (a device repeating itself)
+    duplicates: int = 0  # replies not newer than one already handed on: copies, stale ones
     last_error: str = ""
     extra: dict[str, int] = field(default_factory=dict)
 

@@ -143,8 +143,8 @@ class ControlLoop:
     def _late(self, feedback: Feedback, rx_wall_s: float | None, ref_s: float, ref_wall_s: float,
               samples: list[tuple[Feedback, float]]) -> None:  # fmt: skip
         """A reply that missed its cycle: hand it on at its bus time (dropped when unknown).
-        One whose bus time was handed on already is a copy (a device repeating itself, a reply
-        storm): counted and dropped."""
+        One whose bus time is not after the newest handed on is a copy (a device repeating
+        itself, a reply storm) or stale: counted as a duplicate and dropped."""
         if rx_wall_s is not None and rx_wall_s <= self._last_rx_wall_s:
             self.client.counters.duplicates += 1
             return

@@ -9,8 +9,10 @@ milliseconds later, and acting at the frame's bus time keeps that delay out of t
 reply is only delivered late). Between frames the physics keeps running, idle ticks included.
 Physics: :mod:`transparency_ros.core.actuator_physics` (the one implementation).
 
-Fault injection for tests (more comes with the reliability work): :meth:`SimulatedActuator.silence`
-stops all replies, as a cut cable or a dead controller would.
+Fault injection for tests, all on the wire: :meth:`SimulatedActuator.silence` stops all replies,
+as a cut cable or a dead controller would; :attr:`SimulatedActuator.faults` (:class:`DeviceFaults`)
+duplicates or storms replies, delays them, adds error frames or refuses motor mode;
+:meth:`SimulatedActuator.inject` puts any frame on the bus.
 """
 
 from __future__ import annotations
