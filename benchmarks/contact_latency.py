@@ -33,7 +33,6 @@ benchmarks/results/contact_latency.md and .json.
 from __future__ import annotations
 
 import argparse
-import struct
 import sys
 import threading
 import time
@@ -44,12 +43,11 @@ from typing import Any
 import numpy as np
 from _results import write_results
 
-from transparency_ros.core.cdr import encode_joint_state
+from transparency_ros.core.cdr import encode_joint_state, header_stamp_ns, write_header_stamp
 
 PERIOD_SAMPLES = 50  # an onset every 50 samples
 DEFLECTED_SAMPLES = 5
 ESTIMATOR_PARAMS = {"contact_onset_rad": 0.1, "contact_release_rad": 0.05, "k_s": 2.0}
-STAMP = struct.Struct("<iI")
 
 
 class Recorder:
@@ -71,17 +69,11 @@ class Recorder:
                 self.estimator_stamp_ns = _ns(msg.header.stamp)
 
     def on_contact(self, data: bytes) -> None:
-        self.contact[_stamp_of(data)] = time.time_ns()
+        self.contact[header_stamp_ns(data)] = time.time_ns()
 
 
 def _ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-def _stamp_of(data: bytes) -> int:
-    """header.stamp of a serialized stamped message (little-endian CDR: sec, nanosec at 4)."""
-    sec, nanosec = STAMP.unpack_from(data, 4)
-    return int(sec) * 1_000_000_000 + int(nanosec)
 
 
 class Source:
@@ -107,7 +99,7 @@ class Source:
                 time.sleep(delay)
             message = self.templates[i % PERIOD_SAMPLES < DEFLECTED_SAMPLES]
             t_ns = time.time_ns()
-            STAMP.pack_into(message, 4, t_ns // 1_000_000_000, t_ns % 1_000_000_000)
+            write_header_stamp(message, t_ns // 1_000_000_000, t_ns % 1_000_000_000)
             self.publish(bytes(message))
             self.sent.append(t_ns)
 

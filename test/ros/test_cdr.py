@@ -18,6 +18,8 @@ from transparency_ros.core.cdr import (
     decode_joint_state,
     encode_joint_state,
     encode_wrench_stamped,
+    header_stamp_ns,
+    write_header_stamp,
 )
 
 text = st.text(
@@ -141,3 +143,19 @@ def test_stream_reader_equals_full_decoding(messages, through_rclpy) -> None:  #
         assert got[:4] == want[:4]
         for a, b in zip(got[4:], want[4:], strict=True):
             assert _same(a, b)
+
+
+def test_header_stamp_helpers_on_rclpy_bytes() -> None:
+    msg = WrenchStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 1_700_000_000, 123_456_789
+    data = serialize_message(msg)
+    assert header_stamp_ns(data) == 1_700_000_000_123_456_789
+    template = bytearray(data)
+    write_header_stamp(template, 5, 6)
+    assert header_stamp_ns(bytes(template)) == 5_000_000_006
+    back = deserialize_message(bytes(template), WrenchStamped)
+    assert (back.header.stamp.sec, back.header.stamp.nanosec) == (5, 6)
+    fields = decode_joint_state(encode_joint_state(7, 8, "", ["j"], position=[0.0]))
+    assert fields.stamp_ns == 7_000_000_008 and fields.stamp_s == 7 + 8e-9
+    with pytest.raises(CdrError, match="header"):
+        header_stamp_ns(b"\x00\x00\x00\x00" + bytes(8))

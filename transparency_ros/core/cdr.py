@@ -41,6 +41,28 @@ class JointStateFields(NamedTuple):
     velocity: tuple[float, ...]
     effort: tuple[float, ...]
 
+    @property
+    def stamp_ns(self) -> int:
+        return self.sec * 1_000_000_000 + self.nanosec
+
+    @property
+    def stamp_s(self) -> float:
+        """As ``ros.conversions.stamp_to_s`` (sec + nanosec, not stamp_ns / 1e9: that rounds)."""
+        return self.sec + self.nanosec * 1e-9
+
+
+def header_stamp_ns(data: bytes) -> int:
+    """header.stamp [ns] of any serialized stamped message (little-endian CDR; header first)."""
+    if len(data) < 12 or data[:4] != LITTLE_ENDIAN_CDR:
+        raise CdrError("not a little-endian CDR message with a header")
+    sec, nanosec = _STAMP.unpack_from(data, 4)
+    return int(sec) * 1_000_000_000 + int(nanosec)
+
+
+def write_header_stamp(buffer: bytearray, sec: int, nanosec: int) -> None:
+    """Overwrite header.stamp in a serialized stamped message (a pre-built template)."""
+    _STAMP.pack_into(buffer, 4, sec, nanosec)
+
 
 class _Reader:
     """Reads in order; notes where the layout-defining bytes (counts, strings) and the double

@@ -292,11 +292,11 @@ class ContactEstimatorNode(Node):
             sample = self._decode(data)
             if sample is None:
                 return
-            stamp_ns = sample.sec * 1_000_000_000 + sample.nanosec
+            stamp_ns = sample.stamp_ns
             self._period_arrivals += 1
             try:
                 estimates, events = self.pipeline.sample(
-                    sample.sec + sample.nanosec * 1e-9,
+                    sample.stamp_s,
                     sample.name,
                     list(sample.position),
                     list(sample.velocity),
