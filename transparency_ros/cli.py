@@ -3,18 +3,21 @@
 Each module in ``transparency_ros.commands`` exposes ``register(subparsers)``, which adds its
 parser and sets ``func`` to a ``run(args) -> int``. Errors raised on purpose
 (:class:`TransparencyError`) become one clear line on stderr and exit status 2; anything else
-is a bug and keeps its traceback.
+is a bug and keeps its traceback. Ctrl-C and SIGTERM unwind the command (its bags are closed,
+its node processes stopped), print one line, and exit with 128 + the signal's number.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from collections.abc import Sequence
 
 from transparency_ros import __version__
 from transparency_ros.commands import compare, demo, discrepancy, evaluate, feelcage, model, rig
 from transparency_ros.core.errors import TransparencyError
+from transparency_ros.core.interrupts import interruption_name, terminate_like_interrupt
 
 SUBCOMMANDS = (model, feelcage, rig, evaluate, discrepancy, compare, demo)
 
@@ -37,6 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = signal.getsignal(signal.SIGTERM)
+    terminate_like_interrupt()  # SIGTERM unwinds like Ctrl-C: bags closed, nodes stopped
     try:
         return int(args.func(args))
     except TransparencyError as err:
@@ -44,6 +49,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except BrokenPipeError:  # e.g. `transparency model --json | head`
         return 0
+    except KeyboardInterrupt as err:
+        name = interruption_name(err)
+        print(f"transparency {args.command}: stopped by {name}", file=sys.stderr)
+        return 128 + signal.Signals[name].value
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

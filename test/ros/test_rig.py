@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -13,7 +16,7 @@ import pytest
 pytest.importorskip("rclpy")
 from mcap.reader import make_reader
 
-from transparency_ros.analysis.drop_eval import evaluate_trial
+from transparency_ros.analysis.drop_eval import IncompleteTrialError, evaluate, evaluate_trial
 from transparency_ros.bag.reader import joint_series, open_bag, scalar_series
 from transparency_ros.core.contact_model import model_for
 
@@ -65,3 +68,64 @@ def test_a_drop_trial_recorded_by_the_contract(tmp_path: Path) -> None:
     assert metrics.energy_j == pytest.approx(0.54 * 9.81 * 0.2, rel=0.1)
     model = model_for("U10DD").solve([metrics.energy_j])
     assert metrics.t_r_s == pytest.approx(float(model.t_r_s[0]), abs=0.003)
+
+
+@pytest.mark.parametrize("how", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_during_a_trial_leaves_bags_that_open(tmp_path: Path, how: int) -> None:
+    proc = subprocess.Popen(
+        [str(Path(sys.executable).parent / "transparency"), "rig", "--actuator", "U10DD",
+         "--heights", "0.2,1.1", "--out", str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    second = tmp_path / "U10DD" / "h1100.0mm_t01"
+    partial = second.with_name(second.name + ".partial")
+    try:
+        # the second trial's bag is open while it records (the drop takes 0.47 s + 0.3 s)
+        assert wait_until(partial.exists, 90.0), "the second trial never started recording"
+        time.sleep(0.3)
+        sent = time.time()
+        proc.send_signal(how)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 128 + how, stderr[-2000:]
+    assert f"stopped by {signal.Signals(how).name}" in stderr
+    assert f"{second}  (" in stdout and "INTERRUPTED" in stdout
+    assert not list(tmp_path.rglob("*.partial"))
+    first = tmp_path / "U10DD" / "h0200.0mm_t01"
+    assert evaluate_trial(first).detected  # the finished trial is whole
+    with open_bag(second) as bag:
+        assert bag.custom_data["transparency.interrupted"] == signal.Signals(how).name
+        log_times = [log for _, log, _ in bag.raw(["/joint_states"])]
+        assert bag.topics["/load_cell"].count > 0  # the DAQ up to the signal
+    # recorded up to the signal (1 kHz, give or take this machine's scheduling)
+    assert len(log_times) > 100
+    assert abs(max(log_times) * 1e-9 - sent) < 0.1
+    with pytest.raises(IncompleteTrialError, match="recorded until"):
+        evaluate_trial(second)
+    skipped: list[Exception] = []
+    assert [r.bag for r in evaluate([tmp_path], skipped=skipped.append)] == [str(first)]
+    assert len(skipped) == 1
+
+
+def test_an_unwritable_output_directory_is_refused_before_any_trial(tmp_path: Path) -> None:
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    done = subprocess.run(
+        [str(Path(sys.executable).parent / "transparency"), "rig", "--actuator", "U10DD",
+         "--heights", "0.2", "--out", str(blocker / "bags")],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert "error: cannot create bag directory" in done.stderr and str(blocker) in done.stderr
+    assert "[1/" not in done.stderr  # no trial was started
+
+
+def wait_until(condition: Callable[[], bool], timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.01)
+    return False

@@ -28,6 +28,7 @@ from transparency_ros.bag.reader import (
     open_bag,
     scalar_series,
 )
+from transparency_ros.bag.writer import INTERRUPTED_KEY
 from transparency_ros.core.config import load_drop_test
 from transparency_ros.core.estimator import (
     DetectorSettings,
@@ -99,9 +100,16 @@ def offline_onset(bag: BagSource, k_s: float, threshold: float) -> tuple[float, 
     return None
 
 
+class IncompleteTrialError(BagReadError):
+    """A trial's bag closed by Ctrl-C or SIGTERM during the trial: not evaluated."""
+
+
 def evaluate_trial(path: str | Path, fit_window_s: float = 0.015) -> TrialMetrics:
     drop = load_drop_test()
     with open_bag(path) as bag:
+        interrupted = bag.custom_data.get(INTERRUPTED_KEY)
+        if interrupted is not None:
+            raise IncompleteTrialError(f"{path}: recorded until {interrupted}, an incomplete trial")
         custom = bag.require_custom(*CUSTOM_KEYS)
         actuator = custom["transparency.actuator"]
         try:
@@ -158,12 +166,20 @@ def evaluate_trial(path: str | Path, fit_window_s: float = 0.015) -> TrialMetric
 def evaluate(
     paths: Sequence[str | Path],
     progress: Callable[[int, int, Path], None] = lambda *_: None,
+    skipped: Callable[[IncompleteTrialError], None] | None = None,
 ) -> list[TrialMetrics]:
+    """Every trial under ``paths``; interrupted trials are passed to ``skipped`` (raised when
+    it is None, so they are never dropped silently)."""
     bags = find_bags(paths)
     results = []
     for i, bag in enumerate(bags, 1):
         progress(i, len(bags), bag)
-        results.append(evaluate_trial(bag))
+        try:
+            results.append(evaluate_trial(bag))
+        except IncompleteTrialError as err:
+            if skipped is None:
+                raise
+            skipped(err)
     return results
 
 

@@ -1,7 +1,9 @@
 """Write rosbag2 bags in MCAP storage (profile ``ros2``, message definitions embedded), atomically.
 
 A bag is written into ``<name>.partial`` next to its final path and renamed when it is closed, so
-a reader never sees a half-written bag; a failure removes the partial directory. Before anything
+a reader never sees a half-written bag; a failure removes the partial directory. Ctrl-C or
+SIGTERM (see :mod:`transparency_ros.core.interrupts`) closes the bag with everything written so
+far and ``custom_data`` ``transparency.interrupted`` naming the signal. Before anything
 is recorded, :func:`check_writable` tells whether the directory can take a bag (exists or can be
 made, is writable, has free space), so a trial is not run for nothing.
 """
@@ -26,8 +28,11 @@ from rosbags.rosbag2 import (
 from rosbags.typesys import Stores, get_typestore
 
 from transparency_ros.bag.errors import BagWriteError
+from transparency_ros.core.interrupts import deferred_interrupts, interruption_name
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+# custom_data of a bag closed by Ctrl-C or SIGTERM: which signal ended it (an incomplete trial)
+INTERRUPTED_KEY = "transparency.interrupted"
 MIN_FREE_BYTES = 50 * 1024 * 1024
 
 
@@ -79,7 +84,13 @@ class BagWriter:
             )
 
     def write(self, topic: str, log_time_ns: int, cdr: bytes) -> None:
-        self._writer.write(self._connections[topic], log_time_ns, cdr)
+        connection = self._connections.get(topic)
+        if connection is None:
+            raise BagWriteError(f"bag {self.path}: topic {topic} was not added before writing")
+        try:
+            self._writer.write(connection, log_time_ns, cdr)
+        except (WriterError, OSError) as err:  # a full disk, a file gone
+            raise BagWriteError(f"cannot write {topic} into bag {self.partial}: {err}") from err
         self.count += 1
 
     def write_message(self, topic: str, log_time_ns: int, message: Any) -> None:
@@ -95,14 +106,18 @@ class BagWriter:
         if exc_type is not None and not issubclass(exc_type, KeyboardInterrupt):
             self.abort()
             return
-        # normal end, or Ctrl-C: keep every message written up to here in a bag that opens
-        try:
-            self._writer.close()
-            _name_files_after(self.partial, self.path.name)
-            self.partial.rename(self.path)
-        except (WriterError, OSError) as err:
-            shutil.rmtree(self.partial, ignore_errors=True)
-            raise BagWriteError(f"cannot finish bag {self.path}: {err}") from err
+        # normal end, or Ctrl-C / SIGTERM: keep every message written up to here in a bag that
+        # opens; an interrupted one says so, and a second signal waits for the close
+        if exc is not None:
+            self._writer.set_custom_data(INTERRUPTED_KEY, interruption_name(exc))
+        with deferred_interrupts():
+            try:
+                self._writer.close()
+                _name_files_after(self.partial, self.path.name)
+                self.partial.rename(self.path)
+            except (WriterError, OSError) as err:
+                shutil.rmtree(self.partial, ignore_errors=True)
+                raise BagWriteError(f"cannot finish bag {self.path}: {err}") from err
 
     def abort(self) -> None:
         """Drop everything written so far (the partial directory is removed)."""

@@ -8,6 +8,7 @@ import sys
 from typing import Any
 
 from transparency_ros.analysis.drop_eval import evaluate, summarise
+from transparency_ros.bag.errors import BagReadError
 
 
 def register(subparsers: Any) -> None:
@@ -36,7 +37,12 @@ def run(args: argparse.Namespace) -> int:
         if n > 1:
             print(f"\r[{i}/{n}] {bag}", end="" if i < n else "\n", file=sys.stderr, flush=True)
 
-    results = evaluate(args.bags, progress)
+    def skipped(err: Exception) -> None:
+        print(f"skipped {err}", file=sys.stderr)
+
+    results = evaluate(args.bags, progress, skipped)
+    if not results:
+        raise BagReadError(f"no complete trial in {', '.join(args.bags)}")
     summary = summarise(results)
     if args.plot:
         from transparency_ros.analysis.fig2 import model_curves, plot_fig2  # noqa: PLC0415

@@ -23,7 +23,9 @@ def register(subparsers: Any) -> None:
             "drop the shuttle from each height and record each trial as a bag by the bag "
             "contract (README): /joint_states, /joint_commands, /contact, /estimated_effort, "
             "/load_cell, /shuttle/height, custom_data transparency.*. Bags go to "
-            "OUT/<actuator>/h<height mm>_t<trial>/."
+            "OUT/<actuator>/h<height mm>_t<trial>/. Ctrl-C or SIGTERM keeps the trial in "
+            "progress in a bag that opens, marked custom_data transparency.interrupted (eval "
+            "skips it)."
         ),
     )
     p.add_argument("--actuator", nargs="+", default=list(ACTUATORS), choices=ACTUATORS)
@@ -49,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     heights = parse_heights(args.heights)
     if args.trials < 1:
         raise ConfigError("--trials must be >= 1")
-    from transparency_ros.ros.rig_run import run_rig  # noqa: PLC0415 - needs rclpy
+    from transparency_ros.ros.rig_run import TrialBag, run_rig  # noqa: PLC0415 - needs rclpy
 
     out = Path(args.out)
     total = len(args.actuator) * len(heights) * args.trials
@@ -59,12 +61,14 @@ def run(args: argparse.Namespace) -> int:
         done[0] += 1
         print(f"[{done[0]}/{total}] {text}", file=sys.stderr, flush=True)
 
+    def written(bag: TrialBag) -> None:
+        note = "  INTERRUPTED: the trial up to the signal" if bag.interrupted else ""
+        print(f"{bag.path}  ({bag.messages} messages){note}", flush=True)
+
     count = 0
     for actuator in args.actuator:
         bags = run_rig(actuator, heights, out, trials_per_height=args.trials, seed=args.seed,
-                       progress=progress)  # fmt: skip
+                       progress=progress, written=written)  # fmt: skip
         count += len(bags)
-        for bag in bags:
-            print(f"{bag.path}  ({bag.messages} messages)")
     print(f"{count} bags in {out}; evaluate with: transparency eval {out}", file=sys.stderr)
     return 0

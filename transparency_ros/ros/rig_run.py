@@ -34,6 +34,7 @@ from transparency_ros.bag.writer import BagWriter, check_writable, message_types
 from transparency_ros.core.config import get_actuator, load_drop_test
 from transparency_ros.core.drop_rig import GRAVITY
 from transparency_ros.core.errors import TransparencyError
+from transparency_ros.core.interrupts import deferred_interrupts
 from transparency_ros.ros.conversions import s_to_stamp
 from transparency_ros.ros.harness import (
     Listener,
@@ -64,6 +65,7 @@ class TrialBag:
     path: Path
     height_m: float
     messages: int
+    interrupted: bool = False  # closed by Ctrl-C / SIGTERM during the trial
 
 
 def _daq_messages(blocks: list[Float64MultiArray]) -> list[tuple[str, int, Any]]:
@@ -101,7 +103,10 @@ def run_rig(
     after_contact_s: float = 0.3,
     seed: int = 0,
     progress: Callable[[str], None] = lambda _text: None,
+    written: Callable[[TrialBag], None] = lambda _bag: None,
 ) -> list[TrialBag]:
+    """Record the trials; ``written`` hears of each bag as soon as it is closed (an interrupted
+    trial's bag included, before the interruption propagates)."""
     drop = load_drop_test()
     get_actuator(actuator)  # a clear error for an unknown name
     for h in heights_m:
@@ -126,16 +131,7 @@ def run_rig(
         }, domain_id=domain)  # fmt: skip
         with Listener("transparency_rig") as node:
             call = ServiceCaller(node, lambda: first_exited(procs))
-            recorder = Recorder(node, RECORDED)
-            daq: list[Float64MultiArray] = []
-            recording = [False]
-
-            def on_daq(msg: Float64MultiArray) -> None:
-                if recording[0]:
-                    daq.append(msg)
-
-            node.create_subscription(Float64MultiArray, DAQ_TOPIC, on_daq, 100)
-            commands = node.create_publisher(JointState, "/joint_commands", 10)
+            station = _Station(node, call)
             _joint_position(node, call, 20.0, "within 20 s of starting")
             mass = drop.shuttle_mass_for(actuator)
             for h in heights_m:
@@ -148,22 +144,9 @@ def run_rig(
                     # zero the virtual spring where the arm rests (geared actuators stop up to
                     # tau_s / k_s from theta_d, more than the 0.1 rad threshold), then listen
                     rest = _joint_position(node, call, 5.0, "while the arm rests")
-                    command = JointState(name=["joint"], position=[rest])
-                    command.header.stamp = s_to_stamp(node.get_clock().now().nanoseconds * 1e-9)
-                    commands.publish(command)
+                    station.command(rest)
                     time.sleep(0.1)
                     call(Trigger, "/contact_estimator/reset", Trigger.Request())
-                    daq.clear()
-                    recording[0] = True
-                    recorder.start()
-                    command.header.stamp = s_to_stamp(node.get_clock().now().nanoseconds * 1e-9)
-                    commands.publish(command)  # recorded: theta_d of this trial
-                    time.sleep(0.05)
-                    call(Trigger, "/actuator_driver/sim/drop", Trigger.Request())
-                    time.sleep(math.sqrt(2.0 * h / GRAVITY) + after_contact_s)
-                    time.sleep(0.05)  # the last DAQ block
-                    recording[0] = False
-                    messages = recorder.stop()
                     custom = {
                         "transparency.actuator": actuator,
                         "transparency.k_s": repr(k_s),
@@ -176,22 +159,72 @@ def run_rig(
                         "transparency.trial": "drop_test",
                     }
                     path = bag_dir / name
-                    with BagWriter(path, custom) as bag:
-                        recorder.write_into(bag, messages)
-                        bag.add("/load_cell", "geometry_msgs/msg/WrenchStamped")
-                        bag.add("/shuttle/height", "geometry_msgs/msg/PointStamped")
-                        for topic, ns, msg in _daq_messages(daq):
-                            bag.write_message(topic, ns, msg)
-                        count = bag.count
-                    if not any(t == "/joint_states" for t, _, _ in messages) or not daq:
+                    bag = BagWriter(path, custom)
+                    try:
+                        with bag:
+                            recorded = station.record_drop(bag, rest, h, after_contact_s)
+                    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the bag keeps the trial so far
+                        if path.exists():
+                            written(TrialBag(path, h, bag.count, interrupted=True))
+                        raise
+                    if not recorded.get("/joint_states") or not recorded.get("/load_cell"):
                         raise RigRunError(f"trial {name}: no /joint_states or no DAQ recorded")
-                    bags.append(TrialBag(path, h, count))
+                    trial_bag = TrialBag(path, h, bag.count)
+                    written(trial_bag)
+                    bags.append(trial_bag)
     finally:
         logs = {name: stop_node(proc) for name, proc in procs.items()}
         tail = driver_left_motor_enabled(logs.get("actuator_driver", ""))
         if tail:
             raise RigRunError(f"actuator_driver did not report a disabled motor:\n{tail}")
     return bags
+
+
+class _Station:
+    """This process's side of the rig: the theta_d publisher, the recorder and the DAQ."""
+
+    def __init__(self, node: Any, call: ServiceCaller) -> None:
+        self.node, self.call = node, call
+        self.recorder = Recorder(node, RECORDED)
+        self.commands = node.create_publisher(JointState, "/joint_commands", 10)
+        self.daq: list[Float64MultiArray] = []
+        self.recording = False
+        node.create_subscription(Float64MultiArray, DAQ_TOPIC, self._on_daq, 100)
+
+    def _on_daq(self, msg: Float64MultiArray) -> None:
+        if self.recording:
+            self.daq.append(msg)
+
+    def command(self, theta_d: float) -> None:
+        msg = JointState(name=["joint"], position=[theta_d])
+        msg.header.stamp = s_to_stamp(self.node.get_clock().now().nanoseconds * 1e-9)
+        self.commands.publish(msg)
+
+    def record_drop(
+        self, bag: BagWriter, theta_d: float, height_m: float, after_contact_s: float
+    ) -> dict[str, int]:
+        """One drop into ``bag``: the topics as they arrive, the DAQ blocks at the end (or at
+        the signal that stops it); returns the number of messages per topic."""
+        bag.add("/load_cell", "geometry_msgs/msg/WrenchStamped")
+        bag.add("/shuttle/height", "geometry_msgs/msg/PointStamped")
+        self.daq.clear()
+        self.recording = True
+        self.recorder.start(bag)
+        try:
+            self.command(theta_d)  # recorded: theta_d of this trial
+            time.sleep(0.05)
+            self.call(Trigger, "/actuator_driver/sim/drop", Trigger.Request())
+            time.sleep(math.sqrt(2.0 * height_m / GRAVITY) + after_contact_s)
+            time.sleep(0.05)  # the last DAQ block
+        finally:
+            # also when interrupted: what arrived up to the signal goes into the bag
+            with deferred_interrupts():
+                self.recording = False
+                counts = self.recorder.stop()
+                for topic, ns, msg in _daq_messages(self.daq):
+                    bag.write_message(topic, ns, msg)
+                    counts[topic] = counts.get(topic, 0) + 1
+        return counts
 
 
 def _joint_position(node: Any, call: ServiceCaller, timeout_s: float, what: str) -> float:

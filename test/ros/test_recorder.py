@@ -1,0 +1,90 @@
+"""The recorder: every message received goes into the bag, however the recording ends."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rclpy")
+from rclpy.context import Context
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from test.ros.conftest import Spinner, wait_for
+from transparency_ros.bag.errors import BagWriteError
+from transparency_ros.bag.reader import joint_series, open_bag
+from transparency_ros.bag.writer import INTERRUPTED_KEY, BagWriter
+from transparency_ros.core.interrupts import Terminated, terminate_like_interrupt
+from transparency_ros.ros.recorder import Recorder
+
+pytestmark = pytest.mark.ros
+N = 400
+
+
+def _publish(node: Node, count: int) -> None:
+    pub = node.create_publisher(JointState, "/joint_states", 10)
+    assert wait_for(lambda: pub.get_subscription_count() > 0)
+    for i in range(count):
+        msg = JointState(name=["joint"], position=[float(i)])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 1, i
+        pub.publish(msg)
+        time.sleep(0.0005)
+
+
+@pytest.mark.parametrize("how", ["SIGINT", "SIGTERM"])
+def test_a_signal_keeps_every_message_received(
+    ros_context: Context, tmp_path: Path, how: str
+) -> None:
+    node = Node("recorder_test", context=ros_context)
+    recorder = Recorder(node, {"/joint_states": JointState})
+    spinner = Spinner(ros_context, node)
+    previous = signal.getsignal(signal.SIGTERM)
+    terminate_like_interrupt()
+    counts: dict[str, int] = {}
+
+    def record_until_signal() -> None:
+        with BagWriter(tmp_path / "bag") as bag:
+            recorder.start(bag)
+            try:
+                _publish(node, N)
+                assert wait_for(lambda: bag.count == N)
+                os.kill(os.getpid(), signal.Signals[how])  # as `kill` or Ctrl-C would
+                time.sleep(5.0)
+            finally:
+                counts.update(recorder.stop())
+
+    try:
+        with pytest.raises(Terminated if how == "SIGTERM" else KeyboardInterrupt):
+            record_until_signal()
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        spinner.stop()
+        node.destroy_node()
+    assert counts == {"/joint_states": N}
+    with open_bag(tmp_path / "bag") as kept:
+        assert kept.custom_data[INTERRUPTED_KEY] == how
+        series = joint_series(kept, "/joint_states")
+    assert series.position.tolist() == [float(i) for i in range(N)]  # every one, in order
+
+
+def test_a_failing_write_stops_the_recording_and_is_reported(
+    ros_context: Context, tmp_path: Path
+) -> None:
+    node = Node("recorder_test", context=ros_context)
+    recorder = Recorder(node, {"/joint_states": JointState})
+    spinner = Spinner(ros_context, node)
+    try:
+        with BagWriter(tmp_path / "bag") as bag:
+            recorder.start(bag)
+            bag._connections.clear()  # any failing write, as a full disk gives
+            _publish(node, 3)
+            time.sleep(0.5)
+            with pytest.raises(BagWriteError, match="/joint_states"):
+                recorder.stop()
+    finally:
+        spinner.stop()
+        node.destroy_node()
