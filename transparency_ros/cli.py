@@ -15,11 +15,20 @@ import sys
 from collections.abc import Sequence
 
 from transparency_ros import __version__
-from transparency_ros.commands import compare, demo, discrepancy, evaluate, feelcage, model, rig
+from transparency_ros.commands import (
+    compare,
+    demo,
+    discrepancy,
+    evaluate,
+    feelcage,
+    model,
+    rig,
+    salvage,
+)
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.interrupts import interruption_name, terminate_like_interrupt
 
-SUBCOMMANDS = (model, feelcage, rig, evaluate, discrepancy, compare, demo)
+SUBCOMMANDS = (model, feelcage, rig, evaluate, salvage, discrepancy, compare, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -198,9 +198,13 @@ def _chunks(path: Path) -> Any:
             compression = bytes(data[body + 32 : body + 32 + n]).decode()
             (stored,) = struct.unpack_from("<Q", data, body + 32 + n)
             first = body + 40 + n
-            yield np.frombuffer(
-                _decompress(data[first : first + stored], compression, size), np.uint8
-            )
+            try:
+                raw = _decompress(data[first : first + stored], compression, size)
+            except ValueError:
+                raise
+            except Exception as err:
+                raise ValueError(f"{path}: chunk at byte {body - 9}: {err}") from err
+            yield np.frombuffer(raw, np.uint8)
 
 
 def _decompress(raw: bytes, compression: str, size: int) -> bytes:

@@ -23,6 +23,8 @@ Every error is a :class:`BagReadError` naming the bag and, where it applies, the
 
 from __future__ import annotations
 
+import sqlite3
+import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +40,36 @@ from transparency_ros.bag.errors import BagReadError
 from transparency_ros.bag.fast import FieldArrays, read_fields
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
+
+
+def _storage_errors() -> tuple[type[Exception], ...]:
+    """What rosbags' storage plugins raise past their own ReaderError: sqlite errors (from apsw
+    where it is installed) and struct errors of a broken MCAP record."""
+    errors: list[type[Exception]] = [sqlite3.Error, struct.error, EOFError]
+    try:
+        import apsw  # noqa: PLC0415 - optional, used by rosbags when present
+
+        errors.append(apsw.Error)
+    except ImportError:
+        pass
+    return tuple(errors)
+
+
+STORAGE_ERRORS = _storage_errors()
+READ_ERRORS: tuple[type[Exception], ...] = (ReaderError, *STORAGE_ERRORS)
+OPEN_ERRORS: tuple[type[Exception], ...] = (
+    ReaderError,
+    OSError,
+    KeyError,
+    ValueError,
+    *STORAGE_ERRORS,
+)
+
+
+def _first_line(err: BaseException) -> str:
+    return str(err).splitlines()[0].rstrip(".") if str(err) else type(err).__name__
+
+
 JOINT_STATE = "sensor_msgs/msg/JointState"
 
 
@@ -75,11 +107,24 @@ class BagSource:
                 self._readers = [Reader(p) for p in self.storage_paths]
             for reader in self._readers:
                 reader.open()
-        except (ReaderError, OSError, KeyError, ValueError) as err:
+        except OPEN_ERRORS as err:
             self.close()
-            raise BagReadError(f"{self.path}: cannot open bag: {err}") from err
+            raise BagReadError(self._damaged("cannot open", err)) from err
         self._register_types()
         return self
+
+    def _damaged(self, doing: str, err: BaseException) -> str:
+        """The error message: which storage file fails on its own, and how to recover it."""
+        what = f"{self.path}: {doing}: {_first_line(err)}"
+        for path in self.storage_paths:
+            try:
+                with Reader(path):
+                    pass
+            except OPEN_ERRORS as file_err:
+                if path != self.path:
+                    what = f"{self.path}: {doing}: file {path.name}: {_first_line(file_err)}"
+                break
+        return f"{what}. `transparency salvage {self.path}` copies what is readable"
 
     def __exit__(
         self,
@@ -177,8 +222,9 @@ class BagSource:
                     for conn, stamp, data in reader.messages(connections=wanted):
                         yielded[conn.topic] += 1
                         yield conn, stamp, data
-        except ReaderError as err:
-            raise BagReadError(f"{self.path}: {err}") from err
+        except Exception as err:
+            # sqlite/apsw, zstd/lz4 and struct errors as well as its own ReaderError
+            raise BagReadError(self._damaged(f"reading {', '.join(topics)}", err)) from err
         empty = [t for t in topics if yielded[t] == 0 and self.topics[t].count > 0]
         if empty:
             yield from self._recover(empty)
@@ -193,7 +239,7 @@ class BagSource:
                     for item in reader.messages(connections=wanted):
                         got += 1
                         yield item
-            except ReaderError as err:
+            except READ_ERRORS as err:
                 raise BagReadError(f"{self.path}: recovering {', '.join(topics)}: {err}") from err
         if got == 0:
             raise BagReadError(

@@ -77,11 +77,26 @@ class BagWriter:
             self._writer.set_custom_data(key, value)
         return self
 
-    def add(self, topic: str, msgtype: str) -> None:
+    def add(
+        self,
+        topic: str,
+        msgtype: str,
+        *,
+        typestore: Any = None,
+        serialization_format: str = "cdr",
+    ) -> None:
+        """Declare a topic (once); ``typestore`` defines its type (default: ROS 2 Jazzy's)."""
         if topic not in self._connections:
             self._connections[topic] = self._writer.add_connection(
-                topic, msgtype, typestore=TYPESTORE
+                topic,
+                msgtype,
+                typestore=typestore or TYPESTORE,
+                serialization_format=serialization_format,
             )
+
+    def set_custom(self, key: str, value: str) -> None:
+        """A custom_data entry (written when the bag is closed)."""
+        self._writer.set_custom_data(key, value)
 
     def write(self, topic: str, log_time_ns: int, cdr: bytes) -> None:
         connection = self._connections.get(topic)

@@ -1,0 +1,400 @@
+"""Recover the readable part of a damaged bag into a new one, as ``mcap recover`` does for MCAP.
+
+A recording cut short (power loss, a killed recorder, a copy that stopped) or damaged on disk
+cannot be opened: rosbags, like rosbag2, needs the MCAP summary at the file's end, and sqlite
+refuses a malformed database. What came before the damage is usually intact. This module reads
+each storage file record by record and keeps what it can:
+
+* **MCAP**: every schema, channel and message up to the point where the file ends or a record's
+  framing is broken; a chunk that cannot be decompressed is skipped and reading goes on with the
+  next record (the chunk's length is still known). Chunks carry no CRC in the files rosbag2 and
+  rosbags write, so bytes changed inside a chunk that still decompresses are not detected here;
+  a message that no longer deserializes is reported by the reader with its topic.
+* **sqlite3**: the topics and message definitions, then the messages in blocks of ids; a block
+  that sqlite cannot read is split until the unreadable ids are isolated.
+
+The salvaged messages are written with :class:`~transparency_ros.bag.writer.BagWriter` (MCAP,
+atomically) with the original ``custom_data`` (from metadata.yaml, else from the copy rosbag2
+keeps inside the storage), plus ``transparency.salvaged`` saying where from and what was lost.
+Nothing is written when nothing could be salvaged.
+"""
+
+from __future__ import annotations
+
+import io
+import shutil
+import sqlite3
+import tempfile
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+from mcap import records
+from mcap.reader import make_reader
+from mcap.stream_reader import StreamReader, breakup_chunk
+from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+from transparency_ros.bag.errors import BagReadError
+from transparency_ros.bag.reader import STORAGE_SUFFIXES, normalise_type
+from transparency_ros.bag.writer import BagWriter
+
+SALVAGED_KEY = "transparency.salvaged"
+SQLITE_BLOCK = 1000  # message ids read at once
+SQLITE_EMPTY_BLOCKS = 20  # without max(id): blocks in a row with nothing readable end the search
+
+
+@dataclass(frozen=True)
+class Topic:
+    name: str
+    msgtype: str
+    serialization_format: str
+    definition: tuple[str, str] | None  # (encoding 'ros2msg' | 'ros2idl', text) when stored
+
+
+@dataclass
+class SalvageReport:
+    source: Path
+    out: Path | None  # None: nothing could be salvaged, nothing written
+    kept: Counter[str] = field(default_factory=Counter)  # topic -> messages salvaged
+    recorded: dict[str, int] = field(default_factory=dict)  # topic -> count in metadata.yaml
+    damage: list[str] = field(default_factory=list)  # what was found, file by file
+
+    @property
+    def total(self) -> int:
+        return sum(self.kept.values())
+
+
+# ------------------------------------------------------------------------------- MCAP
+
+
+def _mcap_items(path: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
+    """('topic', Topic) and ('message', (topic, log ns, bytes)) in file order, and
+    ('custom', dict) from rosbag2's metadata record; damage noted, never raised."""
+    schemas: dict[int, records.Schema] = {}
+    channels: dict[int, str] = {}
+    data = path.read_bytes()
+    stream = io.BytesIO(data)
+
+    def handle(record: Any) -> Iterator[tuple[str, Any]]:
+        if isinstance(record, records.Schema):
+            schemas[record.id] = record
+        elif isinstance(record, records.Channel):
+            schema = schemas.get(record.schema_id)
+            if schema is None:
+                damage.append(f"{path.name}: channel {record.topic} has no schema; skipped")
+                return
+            definition = (schema.encoding, schema.data.decode("utf-8", "replace"))
+            channels[record.id] = record.topic
+            yield "topic", Topic(record.topic, normalise_type(schema.name),
+                                 record.message_encoding, definition)  # fmt: skip
+        elif isinstance(record, records.Message):
+            topic = channels.get(record.channel_id)
+            if topic is not None:
+                yield "message", (topic, record.log_time, record.data)
+        elif isinstance(record, records.Metadata) and record.name == "rosbag2":
+            custom = _custom_from_yaml(record.metadata.get("serialized_metadata", ""))
+            if custom:
+                yield "custom", custom
+
+    # the summary at the end (when it survived) repeats every schema and channel: with it, the
+    # messages of later chunks survive a damaged first chunk, where rosbag2 writes them
+    for record in _summary_records(data):
+        yield from handle(record)
+    good = 0  # where the last complete record ends
+    try:
+        for record in StreamReader(stream, emit_chunks=True).records:
+            good = stream.tell()
+            if isinstance(record, records.Chunk):
+                try:
+                    inner = breakup_chunk(record, validate_crc=True)
+                except Exception as err:  # noqa: BLE001 - any decoding failure of one chunk
+                    damage.append(
+                        f"{path.name}: a chunk of {record.uncompressed_size} bytes "
+                        f"({_span(record)}) cannot be read ({_reason(err)}); skipped"
+                    )
+                    continue
+                for item in inner:
+                    yield from handle(item)
+            else:
+                yield from handle(record)
+    except Exception as err:  # noqa: BLE001 - the framing is broken: stop where it is
+        end = "ends" if stream.tell() >= len(data) else "is broken"
+        damage.append(
+            f"{path.name}: {end} after byte {good} of {len(data)} ({_reason(err)}); "
+            "the records after it are lost"
+        )
+
+
+def _summary_records(data: bytes) -> list[Any]:
+    try:
+        summary = make_reader(io.BytesIO(data)).get_summary()
+    except Exception:  # noqa: BLE001 - no readable summary: the stream has to do
+        return []
+    if summary is None:
+        return []
+    return [*summary.schemas.values(), *summary.channels.values()]
+
+
+def _span(chunk: records.Chunk) -> str:
+    return f"log times {chunk.message_start_time}-{chunk.message_end_time} ns"
+
+
+def _reason(err: BaseException) -> str:
+    text = str(err).splitlines()[0] if str(err) else ""
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
+
+
+# ------------------------------------------------------------------------------ sqlite3
+
+
+def _sqlite_items(path: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
+    with tempfile.TemporaryDirectory(prefix="salvage-") as tmp:
+        readable = _padded(path, Path(tmp), damage)
+        try:
+            db = sqlite3.connect(f"file:{readable}?mode=ro", uri=True)
+        except sqlite3.Error as err:
+            damage.append(f"{path.name}: cannot open ({_reason(err)}); nothing salvaged")
+            return
+        try:
+            yield from _sqlite_rows(db, path, damage)
+        finally:
+            db.close()
+
+
+def _padded(path: Path, tmp: Path, damage: list[str]) -> Path:
+    """sqlite refuses a file shorter than its header says (a truncated bag) even where the pages
+    asked for are there: a copy padded with zero pages reads up to the missing ones."""
+    with path.open("rb") as f:
+        header = f.read(100)
+    size = path.stat().st_size
+    if len(header) < 100 or not header.startswith(b"SQLite format 3\x00"):
+        return path
+    page = int.from_bytes(header[16:18], "big")
+    page = 65536 if page == 1 else page
+    declared = int.from_bytes(header[28:32], "big") * page
+    if size >= declared:
+        return path
+    damage.append(f"{path.name}: ends at byte {size} of {declared} (truncated)")
+    copy = tmp / path.name
+    shutil.copyfile(path, copy)
+    with copy.open("ab") as f:
+        f.truncate(declared)
+    return copy
+
+
+def _sqlite_rows(db: sqlite3.Connection, path: Path, damage: list[str]) -> Iterator[Any]:
+    try:
+        tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master")}
+        topics = db.execute("SELECT id, name, type, serialization_format FROM topics").fetchall()
+    except sqlite3.Error as err:
+        damage.append(
+            f"{path.name}: the topics table is unreadable ({_reason(err)}); nothing salvaged"
+        )
+        return
+    definitions = _sqlite_definitions(db, tables, path, damage)
+    if "metadata" in tables:
+        try:
+            row = db.execute("SELECT metadata FROM metadata ORDER BY id DESC LIMIT 1").fetchone()
+            custom = _custom_from_yaml(row[0]) if row else {}
+        except sqlite3.Error:
+            custom = {}  # the copy in metadata.yaml, if any, is used
+        if custom:
+            yield "custom", custom
+    names: dict[int, str] = {}
+    for topic_id, name, msgtype, fmt in topics:
+        names[topic_id] = name
+        yield (
+            "topic",
+            Topic(name, normalise_type(msgtype), fmt, definitions.get(normalise_type(msgtype))),
+        )
+    try:
+        last: int | None = db.execute("SELECT max(id) FROM messages").fetchone()[0] or 0
+    except sqlite3.DatabaseError:
+        last = None  # the highest ids are lost: read on until blocks stay empty
+    lost: list[tuple[int, int]] = []
+    start, empty = 1, 0
+    while (start <= last) if last is not None else (empty < SQLITE_EMPTY_BLOCKS):
+        rows = _sqlite_block(db, start, start + SQLITE_BLOCK - 1, lost)
+        empty = 0 if rows else empty + 1
+        for topic_id, stamp, data in rows:
+            if topic_id in names:
+                yield "message", (names[topic_id], stamp, bytes(data))
+        start += SQLITE_BLOCK
+    if lost:
+        merged = _merge(lost)
+        if last is None and merged[-1][1] == start - 1:  # probed past the end: open-ended
+            merged[-1] = (merged[-1][0], -1)
+        spans = ", ".join(
+            f"{a} on" if b < 0 else f"{a}-{b}" if a != b else f"{a}" for a, b in merged[:10]
+        )
+        damage.append(f"{path.name}: message ids {spans} unreadable (malformed pages); skipped")
+
+
+def _sqlite_definitions(
+    db: sqlite3.Connection, tables: set[str], path: Path, damage: list[str]
+) -> dict[str, tuple[str, str]]:
+    """Type -> (encoding, definition) from the message_definitions table (rosbag2 Iron on)."""
+    definitions: dict[str, tuple[str, str]] = {}
+    if "message_definitions" in tables:
+        try:
+            for msgtype, encoding, text in db.execute(
+                "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"
+            ):
+                definitions[normalise_type(msgtype)] = (encoding, text)
+        except sqlite3.Error as err:
+            damage.append(f"{path.name}: message definitions unreadable ({_reason(err)})")
+    return definitions
+
+
+def _sqlite_block(
+    db: sqlite3.Connection, lo: int, hi: int, lost: list[tuple[int, int]]
+) -> list[tuple[int, int, bytes]]:
+    try:
+        return db.execute(
+            "SELECT topic_id, timestamp, data FROM messages WHERE id BETWEEN ? AND ? ORDER BY id",
+            (lo, hi),
+        ).fetchall()
+    except sqlite3.DatabaseError:
+        if lo == hi:
+            lost.append((lo, hi))
+            return []
+        mid = (lo + hi) // 2
+        return _sqlite_block(db, lo, mid, lost) + _sqlite_block(db, mid + 1, hi, lost)
+
+
+def _merge(spans: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    merged: list[tuple[int, int]] = []
+    for a, b in sorted(spans):
+        if merged and a <= merged[-1][1] + 1:
+            merged[-1] = (merged[-1][0], max(b, merged[-1][1]))
+        else:
+            merged.append((a, b))
+    return merged
+
+
+# ------------------------------------------------------------------------------ metadata
+
+
+def _custom_from_yaml(text: str) -> dict[str, str]:
+    try:
+        info = yaml.safe_load(text) or {}
+    except yaml.YAMLError:
+        return {}
+    info = info.get("rosbag2_bagfile_information", info) if isinstance(info, dict) else {}
+    custom = info.get("custom_data") if isinstance(info, dict) else None
+    return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
+
+
+def _metadata(bag: Path, damage: list[str]) -> tuple[dict[str, str] | None, dict[str, int]]:
+    """custom_data and the recorded message counts from metadata.yaml (None: no usable file)."""
+    meta = bag / "metadata.yaml"
+    if not meta.is_file():
+        return None, {}
+    try:
+        info = yaml.safe_load(meta.read_text()) or {}
+        info = info["rosbag2_bagfile_information"]
+        counts = {
+            t["topic_metadata"]["name"]: int(t["message_count"])
+            for t in info.get("topics_with_message_count", [])
+        }
+    except (yaml.YAMLError, KeyError, TypeError, ValueError, UnicodeDecodeError) as err:
+        damage.append(
+            f"metadata.yaml: unreadable ({_reason(err)}); custom_data taken from the storage"
+        )
+        return None, {}
+    return _custom_from_yaml(yaml.safe_dump({"custom_data": info.get("custom_data") or {}})), counts
+
+
+# ------------------------------------------------------------------------------ salvage
+
+
+def storage_files(bag: Path) -> list[Path]:
+    if bag.is_file():
+        return [bag]
+    return sorted(p for p in bag.iterdir() if p.suffix in STORAGE_SUFFIXES)
+
+
+class _Types:
+    """A Jazzy typestore to which the bag's own definitions are added, topic by topic."""
+
+    def __init__(self, damage: list[str]) -> None:
+        self.store = get_typestore(Stores.ROS2_JAZZY)
+        self.damage = damage
+
+    def known(self, topic: Topic) -> bool:
+        if topic.msgtype in self.store.types:
+            return True
+        try:
+            if topic.definition is None:
+                raise KeyError("not defined in the bag")
+            encoding, text = topic.definition
+            if encoding == "ros2idl":
+                types = get_types_from_idl(text)
+            else:
+                types = get_types_from_msg(text, topic.msgtype)
+            self.store.register(types)
+        except Exception as err:  # noqa: BLE001 - any parser failure: that topic is left out
+            self.damage.append(
+                f"topic {topic.name}: type {topic.msgtype} unknown ({_reason(err)}); left out"
+            )
+            return False
+        return True
+
+
+class _NothingSalvagedError(Exception):
+    pass
+
+
+def salvage(
+    bag: str | Path,
+    out: str | Path | None = None,
+    progress: Callable[[str], None] = lambda _text: None,
+) -> SalvageReport:
+    """Copy what is readable of ``bag`` (a bag directory or one storage file) into ``out``
+    (default ``<bag>.salvaged``), message by message (memory does not grow with the bag)."""
+    source = Path(bag)
+    if not source.exists():
+        raise BagReadError(f"{source}: no such bag")
+    files = storage_files(source)
+    if not files:
+        raise BagReadError(f"{source}: no .mcap or .db3 files to salvage")
+    target = Path(out) if out is not None else source.with_name(source.name + ".salvaged")
+    report = SalvageReport(source, None)
+    custom, report.recorded = _metadata(source if source.is_dir() else source.parent, report.damage)
+    types = _Types(report.damage)
+    seen: set[str] = set()
+    written: set[str] = set()  # topics declared in the new bag
+    stored_custom: dict[str, str] = {}
+    try:
+        with BagWriter(target) as writer:
+            for path in files:
+                progress(f"reading {path.name}")
+                items = _mcap_items if path.suffix == ".mcap" else _sqlite_items
+                for kind, value in items(path, report.damage):
+                    if kind == "message":
+                        if value[0] in written:
+                            writer.write(*value)
+                            report.kept[value[0]] += 1
+                    elif kind == "topic" and value.name not in seen:
+                        seen.add(value.name)
+                        if types.known(value):
+                            writer.add(value.name, value.msgtype, typestore=types.store,
+                                       serialization_format=value.serialization_format)  # fmt: skip
+                            written.add(value.name)
+                    elif kind == "custom":
+                        stored_custom.update(value)
+            if not report.kept:
+                raise _NothingSalvagedError
+            data = dict(stored_custom if custom is None else custom)
+            lost = "; ".join(report.damage) or "no damage found"
+            data[SALVAGED_KEY] = f"from {source}: {lost}"
+            for key, value in data.items():
+                writer.set_custom(key, value)
+    except _NothingSalvagedError:
+        report.damage.append("no message could be read: nothing written")
+        return report
+    report.out = target
+    return report
