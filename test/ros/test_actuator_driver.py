@@ -302,3 +302,76 @@ def test_help_lists_parameters() -> None:
         "publish_rate_hz",
     ):
         assert f"  {name} = " in out.stdout
+
+
+FAILING_DRIVER = """
+import sys, time
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from transparency_ros.canbus.loop import ControlLoop
+from transparency_ros.ros import actuator_driver as driver
+
+how, start = sys.argv[1], time.monotonic()
+
+
+def later() -> bool:  # after the motor has run for a while
+    return time.monotonic() - start > 2.0
+
+
+if how == "callback exception":
+    def diagnostics(self):
+        if later():
+            raise RuntimeError("injected: a callback failed")
+    driver.ActuatorDriverNode.publish_diagnostics = diagnostics
+elif how == "executor error":
+    spin_once = MultiThreadedExecutor._spin_once_impl
+    def failing(self, *args, **kwargs):
+        if later():
+            raise _rclpy.RCLError("injected: the executor failed")
+        return spin_once(self, *args, **kwargs)
+    MultiThreadedExecutor._spin_once_impl = failing
+elif how == "hardware loop exception":
+    cycle = ControlLoop.cycle
+    def failing_cycle(self):
+        if later():
+            raise RuntimeError("injected: the hardware loop failed")
+        cycle(self)
+    ControlLoop.cycle = failing_cycle
+sys.exit(driver.main(["--ros-args", "-p", "diagnostics_period_s:=0.2", *sys.argv[2:]]))
+"""
+
+
+INJECTED = {
+    "callback exception": "injected: a callback failed",
+    "executor error": "injected: the executor failed",
+    "hardware loop exception": "injected: the hardware loop failed",
+}
+
+
+@pytest.mark.parametrize("how", sorted(INJECTED))
+def test_failures_leave_the_motor_disabled(how: str) -> None:
+    """The exit paths a signal does not cover: the node's process fails (or, for the hardware
+    loop, keeps running in FAULT until stopped); the simulated device saw the exit frame."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", FAILING_DRIVER, how, "-p", "publish_rate_hz:=200.0"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ),
+    )  # fmt: skip
+    try:
+        if how == "hardware loop exception":
+            time.sleep(4.0)  # the loop has failed; the node runs on, the motor is off
+            assert proc.poll() is None
+            proc.send_signal(signal.SIGINT)
+        output, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert INJECTED[how] in output, output
+    seen = seen_line(output)
+    assert "enter=1" in seen and "exit=" in seen and "exit=0" not in seen, seen
+    assert seen.endswith("motor enabled at exit: False")
+    if how == "hardware loop exception":
+        assert proc.returncode == 0, output
+        assert "hardware loop stopped by an error, motor disabled" in output, output
+    else:
+        assert proc.returncode != 0  # the failure is not hidden
+        assert "Traceback" in output

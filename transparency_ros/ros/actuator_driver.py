@@ -535,7 +535,7 @@ class ActuatorDriverNode(LifecycleNode):
             self.sim.stop()
             seen = ", ".join(f"{k}={v}" for k, v in sorted(self.sim.events.items()))
             driven = self.sim.personality.is_enabled()
-            rclpy.logging.get_logger(NODE_NAME).info(
+            _exit_logger().info(
                 f"simulated actuator saw: {seen}; motor enabled at exit: {driven}"
             )
             self.sim = None
@@ -691,6 +691,13 @@ class ActuatorDriverNode(LifecycleNode):
         self._diag_pub.publish(array)
 
 
+def _exit_logger() -> Any:
+    """A logger for the last words: the node's own also publishes to /rosout, which is gone
+    once a signal has shut the context down (rcl then prints "Failed to publish log message to
+    rosout")."""
+    return rclpy.logging.get_logger(f"{NODE_NAME}.exit")
+
+
 DESCRIPTION = (
     "Drive one CAN actuator (MIT mode, ODrive CANSimple or moteus) and publish its state on "
     "/joint_states; follow /joint_commands with an impedance law. Lifecycle node; with "
@@ -721,8 +728,7 @@ def main(args: list[str] | None = None) -> int:
     finally:
         if node is not None:
             node.make_safe()
-            # the node's logger also publishes to /rosout, which is gone after a signal
-            rclpy.logging.get_logger(NODE_NAME).info("shut down: motor disabled, bus closed")
+            _exit_logger().info("shut down: motor disabled, bus closed")
             node.destroy_node()
         try_shutdown()
     return 0
