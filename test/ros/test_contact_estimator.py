@@ -6,6 +6,7 @@ import itertools
 import math
 import struct
 import threading
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -273,3 +274,27 @@ def test_with_the_driver_the_event_stamp_is_a_joint_state_stamp(
         extra.stop()
         driver.destroy_node()
         rig.close()
+
+
+def test_a_burst_beyond_the_queue_is_counted_as_lost(rig_factory: Any) -> None:
+    """A slow moment of the estimator during a burst: DDS keeps only queue_depth samples and
+    drops the rest silently; the publication sequence numbers count every one of them."""
+    rig = rig_factory(queue_depth=10, contact_onset_rad=0.1, contact_release_rad=0.05)
+    burst = 2000
+    with rig.node.lock:  # the hot path's handler waits: the queue overflows
+        for i in range(burst):
+            rig.send(30.0 + 1e-5 * i, 0.0)
+        time.sleep(0.2)
+    rig.send(31.0, -0.2)  # valid after the burst: a contact
+    assert wait_for(lambda: len(rig.contacts) == 1)
+    delivery = rig.node.delivery
+    assert delivery is not None
+    assert delivery.received + delivery.lost == burst + 1  # every sample accounted for
+    assert delivery.lost >= burst - 100  # most of the burst never reached the node
+    assert wait_for(
+        lambda: (
+            rig.diagnostics[-1:] and rig.diagnostics[-1]["joint_states_lost"] == str(delivery.lost)
+        ),
+        timeout_s=3.0,
+    )
+    assert rig.diagnostics[-1]["joint_states_received"] == str(delivery.received)

@@ -535,9 +535,7 @@ class ActuatorDriverNode(LifecycleNode):
             self.sim.stop()
             seen = ", ".join(f"{k}={v}" for k, v in sorted(self.sim.events.items()))
             driven = self.sim.personality.is_enabled()
-            _exit_logger().info(
-                f"simulated actuator saw: {seen}; motor enabled at exit: {driven}"
-            )
+            _exit_logger().info(f"simulated actuator saw: {seen}; motor enabled at exit: {driven}")
             self.sim = None
         self.loop = None
 

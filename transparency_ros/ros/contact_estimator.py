@@ -64,7 +64,7 @@ from transparency_ros.core.estimator import (
 from transparency_ros.core.histogram import DurationHistogram
 from transparency_ros.ros import in_process
 from transparency_ros.ros.conversions import s_to_stamp, stamp_to_s
-from transparency_ros.ros.hot_path import HotPath
+from transparency_ros.ros.hot_path import Delivery, HotPath
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, run_node
 
 NODE_NAME = "contact_estimator"
@@ -207,14 +207,16 @@ class ContactEstimatorNode(Node):
         self._reader = JointStateReader()
         self.hot_path = HotPath(self, priority=self.values["hot_path_priority"])
         self._leave_in_process = None
+        self.delivery: Delivery | None = None  # what DDS delivered and lost (not in-process)
         if self.values["in_process"]:
             self._leave_in_process = in_process.subscribe(
                 self.context, "/joint_states", self.hot_path.guarded(self._on_state_bytes)
             )
         else:
-            self.hot_path.subscribe(
+            sub = self.hot_path.subscribe(
                 JointState, "/joint_states", self.values["queue_depth"], self._on_state_bytes
             )
+            self.delivery = self.hot_path.delivery(sub)
             self.hot_path.start()
 
     def destroy_node(self) -> None:
@@ -349,6 +351,8 @@ class ContactEstimatorNode(Node):
             self.handler_time.reset()
             self.sample_age.reset()
             self.onset_age.reset()
+            if self.delivery is not None:
+                self.delivery.reset()
         for pub in self._state_pubs.values():
             pub.publish(UInt8(data=0))
         response.success = True
@@ -368,6 +372,7 @@ class ContactEstimatorNode(Node):
             ages = {"sample_age": self.sample_age.copy(), "onset_age": self.onset_age.copy()}
         rejected = sum(rejected_by.values())
         problems = [f"{rejected} samples rejected"] if rejected else []
+        delivery = self._delivery_values(problems)
         if self.hot_path.priority_error:
             problems.append(self.hot_path.priority_error)
         status.level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
@@ -388,10 +393,29 @@ class ContactEstimatorNode(Node):
                 values[f"{key}_p{q}_us"] = f"{hist.percentile(q) * 1e6:.{digits}f}"
             values[f"{key}_max_us"] = f"{hist.max_s * 1e6:.{digits}f}"
         values.update({f"rejected_{k}": v for k, v in rejected_by.items()})
+        values.update(delivery)
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(array)
+
+    def _delivery_values(self, problems: list[str]) -> dict[str, Any]:
+        """/joint_states received and lost on the way (publication sequence numbers), since
+        start or ~/reset; a loss is a problem (WARN)."""
+        if self.delivery is None:
+            return {"joint_states_lost": "n/a (in-process)"}
+        d = self.delivery
+        publishers = self.count_publishers("/joint_states")
+        if publishers > 1:
+            lost: Any = f"unknown ({publishers} publishers)"
+        else:
+            lost = d.lost
+            if d.lost:
+                problems.append(
+                    f"{d.lost} /joint_states samples lost before the estimator (a burst beyond "
+                    f"queue_depth {self.values['queue_depth']}, or the network)"
+                )
+        return {"joint_states_received": d.received, "joint_states_lost": lost}
 
     def reconfigure(self, **changes: Any) -> None:
         """Set several parameters atomically (validated together), as the parameter service's

@@ -28,6 +28,7 @@ import time
 import traceback
 from collections.abc import Callable
 from contextlib import ExitStack
+from dataclasses import dataclass
 from typing import Any
 
 from rclpy.callback_groups import CallbackGroup
@@ -54,6 +55,33 @@ class Unserved(CallbackGroup):
         pass
 
 
+@dataclass
+class Delivery:
+    """What reached a subscription, and what the DDS layer lost on the way, from the
+    publication sequence numbers: a gap is samples the publisher sent that never arrived (the
+    subscription's queue overflowed in a burst, or the network dropped them). Exact for one
+    publisher; with several, their numbers interleave (``publishers`` tells the reader)."""
+
+    received: int = 0
+    lost: int = 0
+    restarts: int = 0  # the sequence went back: a new publisher, or several interleaved
+    last: int | None = None
+
+    def note(self, sequence: int | None) -> None:
+        self.received += 1
+        if sequence is None:  # an RMW without sequence numbers
+            return
+        if self.last is not None:
+            if sequence > self.last + 1:
+                self.lost += sequence - self.last - 1
+            elif sequence <= self.last:
+                self.restarts += 1
+        self.last = sequence
+
+    def reset(self) -> None:
+        self.received = self.lost = self.restarts = 0
+
+
 class HotPath:
     """Raw subscriptions of ``node`` served by one thread; :meth:`start` after adding them,
     :meth:`stop` before destroying the node (also done when the context shuts down)."""
@@ -63,7 +91,7 @@ class HotPath:
         self.priority = priority  # SCHED_FIFO priority of the thread (0: normal scheduling)
         self.priority_error = ""  # why the priority could not be set
         self.group = Unserved()
-        self._subs: list[tuple[Any, Handler]] = []
+        self._subs: list[tuple[Any, Handler, Delivery]] = []
         self._wake = GuardCondition(None, None, context=node.context)
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
@@ -77,8 +105,13 @@ class HotPath:
         sub = self.node.create_subscription(
             msg_type, topic, lambda _msg: None, qos, callback_group=self.group, raw=True
         )
-        self._subs.append((sub, handler))
+        self._subs.append((sub, handler, Delivery()))
         return sub
+
+    def delivery(self, sub: Any) -> Delivery:
+        """The delivery counts of a subscription made by :meth:`subscribe` (read them under
+        the lock the handler takes, or accept a sample's worth of skew)."""
+        return next(d for s, _, d in self._subs if s is sub)
 
     def start(self) -> None:
         self._thread = threading.Thread(
@@ -111,7 +144,7 @@ class HotPath:
         while not self._stopping.is_set() and context.ok():
             try:
                 with ExitStack() as held:
-                    for sub, _ in self._subs:
+                    for sub, _, _ in self._subs:
                         held.enter_context(sub.handle)
                     held.enter_context(self._wake.handle)
                     handle = context.handle
@@ -120,14 +153,15 @@ class HotPath:
                     if wait_set is None:
                         wait_set = _rclpy.WaitSet(len(self._subs), 1, 0, 0, 0, 0, handle)
                     wait_set.clear_entities()
-                    for sub, _ in self._subs:
+                    for sub, _, _ in self._subs:
                         wait_set.add_subscription(sub.handle)
                     wait_set.add_guard_condition(self._wake.handle)
                     wait_set.wait(WAKE_CHECK_NS)
                     if self._stopping.is_set():
                         return
-                    for sub, handler in self._subs:
+                    for sub, handler, delivery in self._subs:
                         while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
+                            delivery.note(taken[1].get("publication_sequence_number"))
                             self._call(handler, taken[0])
             except InvalidHandle:
                 return  # the node is being destroyed
