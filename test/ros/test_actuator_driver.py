@@ -375,3 +375,18 @@ def test_failures_leave_the_motor_disabled(how: str) -> None:
     else:
         assert proc.returncode != 0  # the failure is not hidden
         assert "Traceback" in output
+
+
+def test_a_persistently_late_device_is_reported(driver_factory: Any) -> None:
+    """Late replies keep the watchdog content (the motor is alive); diagnostics say WARN."""
+    node, probe = driver_factory("mit", diagnostics_period_s=0.2)
+    assert wait_for(lambda: len(probe.states) > 20)
+    node.sim.faults.reply_delay_s = 0.01  # every reply 10 ms late; the wait is 2 ms
+    assert wait_for(
+        lambda: any(d.level == DiagnosticStatus.WARN and "replies late" in d.message
+                    for d in probe.diagnostics[-3:]),
+        timeout_s=5.0,
+    ), [d.message for d in probe.diagnostics[-3:]]  # fmt: skip
+    assert node.core.mode is DriverMode.ACTIVE  # alive: no fault
+    node.sim.faults.reply_delay_s = 0.0
+    assert wait_for(lambda: probe.diagnostics[-1].level == DiagnosticStatus.OK, timeout_s=5.0)

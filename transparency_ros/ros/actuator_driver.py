@@ -318,6 +318,7 @@ class ActuatorDriverNode(LifecycleNode):
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._late_seen = (0, 0)  # (late replies, replies) at the last diagnostics
         self.create_timer(self.values["diagnostics_period_s"], self.publish_diagnostics)
         self.create_service(Trigger, "~/set_zero", self._on_set_zero)
         self.create_service(SetBool, "~/enable", self._on_enable)
@@ -636,6 +637,18 @@ class ActuatorDriverNode(LifecycleNode):
 
     # ----------------------------------------------------------------- diagnostics
 
+    def _late_in_period(self) -> str | None:
+        """A warning when most replies of this diagnostics period came after the loop's wait.
+
+        Late replies keep the reply watchdog content (the motor is alive), so a device that is
+        persistently slower than ``reply_timeout_s`` runs on without a fault; this says so."""
+        if self.client is None:
+            return None
+        c = self.client.counters
+        late, replies = c.late - self._late_seen[0], c.rx - self._late_seen[1]
+        self._late_seen = (c.late, c.rx)
+        return _late_message(late, replies, self.values["reply_timeout_s"])
+
     def publish_diagnostics(self) -> None:
         status = DiagnosticStatus(
             name=f"{NODE_NAME}: {self.values['joint_name']}",
@@ -650,6 +663,8 @@ class ActuatorDriverNode(LifecycleNode):
             status.level = DiagnosticStatus.WARN
             status.message = f"no command for {self.core.settings.command_timeout_s} s: "
             status.message += self.core.settings.timeout_action.value
+        elif (late := self._late_in_period()) is not None:
+            status.level, status.message = DiagnosticStatus.WARN, late
         else:
             status.level, status.message = DiagnosticStatus.OK, s.mode.value
         values: dict[str, Any] = {
@@ -694,6 +709,18 @@ def _exit_logger() -> Any:
     once a signal has shut the context down (rcl then prints "Failed to publish log message to
     rosout")."""
     return rclpy.logging.get_logger(f"{NODE_NAME}.exit")
+
+
+LATE_WARN_FRACTION = 0.5  # more of a period's replies late than this: WARN
+
+
+def _late_message(late: int, replies: int, timeout_s: float) -> str | None:
+    if replies <= 0 or late <= LATE_WARN_FRACTION * replies:
+        return None
+    return (
+        f"{late} of {replies} replies late this period: the device or bus answers slower than "
+        f"reply_timeout_s {timeout_s * 1e3:g} ms (samples are published at their bus time)"
+    )
 
 
 DESCRIPTION = (
