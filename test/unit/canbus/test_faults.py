@@ -16,6 +16,7 @@ from collections.abc import Iterator
 
 import can
 import pytest
+from can.interfaces.virtual import VirtualBus
 
 from test.unit.canbus.test_loop_with_sim import EXIT_EVENT, make, wait_for
 from transparency_ros.canbus.client import ActuatorClient, BusSettings
@@ -152,3 +153,62 @@ def test_a_motor_that_never_enters_motor_mode_is_refused_then_enabled(rig: Rig) 
     assert not rig.sim.personality.is_enabled()
     rig.sim.faults.refuse_enable = False
     assert rig.loop.enable() is not None and rig.loop.core.mode is DriverMode.ACTIVE
+
+
+class _BusOffAfter(VirtualBus):
+    """A virtual bus whose controller can go bus-off: while ``down``, python-can's own error
+    comes back from send and receive, as from a real interface whose controller has left the
+    bus (a virtual bus cannot be made to do that)."""
+
+    down = False
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self.down:
+            raise can.CanOperationError("bus-off (injected)")
+        super().send(msg, timeout)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self.down:
+            raise can.CanOperationError("bus-off (injected)")
+        return super()._recv_internal(timeout)
+
+
+@pytest.mark.parametrize("name", PROTOCOLS)
+def test_bus_off_trips_the_fault_and_the_motor_recovers_when_the_bus_returns(name: str) -> None:
+    protocol, personality = make(name)
+    settings = BusSettings(channel=f"fault_test_{next(_channels)}", fd=protocol.is_fd)
+    physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
+    sim = SimulatedActuator(physics, personality, settings).start()
+    bus = _BusOffAfter(channel=settings.channel, fd=protocol.is_fd)
+    client = ActuatorClient(protocol, bus)
+    core = DriverCore(DriverSettings(max_missed_replies=MAX_MISSED))
+    loop = ControlLoop(client, core, rate_hz=500.0, reply_timeout_s=0.0015)
+    faults: list[str] = []
+    loop.on_fault = faults.append
+    try:
+        assert loop.enable() is not None
+        loop.start()
+        assert wait_for(lambda: client.counters.samples > 20)
+        c = client.counters
+        tx_errors, rx_errors = c.tx_errors, c.rx_errors
+        bus.down = True
+        assert wait_for(lambda: bool(faults), 2.0)
+        assert core.mode is DriverMode.FAULT
+        assert c.tx_errors > tx_errors and c.rx_errors > rx_errors
+        assert "bus-off (injected)" in c.last_error
+        assert faults == [f"{MAX_MISSED} replies missed in a row"]
+        # the safe command could not reach the device either (a real motor's own watchdog,
+        # where it has one, is what stops it); once the bus is back the motor is enabled
+        # again, and disabled at the end with the exit frame seen
+        bus.down = False
+        loop.stop()
+        assert loop.enable() is not None and core.mode is DriverMode.ACTIVE
+        samples = c.samples
+        loop.start()
+        assert wait_for(lambda: c.samples > samples + 20)
+    finally:
+        loop.stop()
+        loop.disable()
+        client.close()
+        sim.stop()
+    assert sim.events[EXIT_EVENT[name]] >= 1 and not sim.personality.is_enabled()
