@@ -10,6 +10,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 DEMO_OUT ?= demo_output
 PYTEST_ARGS ?=
+FUZZ_SECONDS ?= 60
 
 # Every ROS process started from here stays on loopback, on a domain ID nobody else here uses.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
@@ -17,13 +18,14 @@ export ROS_DOMAIN_ID := $(shell $(PYTHON) transparency_ros/rosenv.py)
 # Plots are written to files; never try to open a window.
 export MPLBACKEND := Agg
 
-.PHONY: all demo test lint typecheck pytest bench lock clean help
+.PHONY: all demo test lint typecheck pytest bench fuzz lock clean help
 all: test
 
 help:
 	@echo "make demo   run the demonstration into $(DEMO_OUT)/"
 	@echo "make test   lint, type-check and run the test suite"
 	@echo "make bench  run the benchmarks (benchmarks/), results in benchmarks/results/"
+	@echo "make fuzz   fuzz the bag reader, CAN decoders and CDR reader (FUZZ_SECONDS=$(FUZZ_SECONDS) each)"
 	@echo "make lock   re-resolve requirements/*.in into requirements/constraints.txt"
 	@echo "make clean  remove .venv and generated output"
 
@@ -56,6 +58,10 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/model_sweep.py
 	$(BIN)/python benchmarks/discrepancy_scaling.py
 	$(BIN)/python benchmarks/driver_loop.py
+
+# Bounded mutational fuzzing (not part of make test); findings: benchmarks/results/fuzz/, status 1.
+fuzz: $(STAMP)
+	$(BIN)/python benchmarks/fuzz.py --seconds $(FUZZ_SECONDS)
 
 # Re-resolve the pins (run by a maintainer, then commit requirements/constraints.txt).
 lock:

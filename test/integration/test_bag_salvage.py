@@ -287,3 +287,21 @@ def test_any_damage_gives_messages_or_a_clear_error(
     assert len(got) == report.total > 0
     if not flips:  # truncation alone: only original messages
         assert set(got) <= set(written)
+
+
+def test_damaged_values_sqlite_still_reads_are_skipped_by_name(tmp_path: Path) -> None:
+    """Found by `make fuzz`: cells of the wrong type or with invalid UTF-8 that sqlite reads
+    without complaint (they ended salvage with a TypeError or UnicodeDecodeError)."""
+    written = _sqlite_bag(tmp_path / "bag", 50)
+    (db,) = (tmp_path / "bag").glob("*.db3")
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE messages SET timestamp = 1.5 WHERE id = 3")
+        con.execute("UPDATE messages SET data = 'text, not a blob' WHERE id = 4")
+        con.execute("UPDATE message_definitions SET topic_type = 42")
+        con.execute("INSERT INTO topics (id, name, type, serialization_format, "
+                    "offered_qos_profiles, type_description_hash) "
+                    "VALUES (9, CAST(X'2FF2' AS TEXT), 42, 'cdr', '', '')")  # fmt: skip
+    report = salvage(tmp_path / "bag", tmp_path / "out")
+    assert _salvaged(tmp_path / "out") == [m for i, m in enumerate(written, 1) if i not in (3, 4)]
+    assert "bag.db3: 2 message rows with damaged values; skipped" in report.damage
+    assert any("type 42 not writable" in d for d in report.damage), report.damage

@@ -23,8 +23,6 @@ Every error is a :class:`BagReadError` naming the bag and, where it applies, the
 
 from __future__ import annotations
 
-import sqlite3
-import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,37 +31,13 @@ from typing import Any
 
 import numpy as np
 from rosbags.interfaces import Connection, MessageDefinitionFormat
-from rosbags.rosbag2 import Reader, ReaderError
+from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
 from transparency_ros.bag.errors import BagReadError
 from transparency_ros.bag.fast import FieldArrays, read_fields
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
-
-
-def _storage_errors() -> tuple[type[Exception], ...]:
-    """What rosbags' storage plugins raise past their own ReaderError: sqlite errors (from apsw
-    where it is installed) and struct errors of a broken MCAP record."""
-    errors: list[type[Exception]] = [sqlite3.Error, struct.error, EOFError]
-    try:
-        import apsw  # noqa: PLC0415 - optional, used by rosbags when present
-
-        errors.append(apsw.Error)
-    except ImportError:
-        pass
-    return tuple(errors)
-
-
-STORAGE_ERRORS = _storage_errors()
-READ_ERRORS: tuple[type[Exception], ...] = (ReaderError, *STORAGE_ERRORS)
-OPEN_ERRORS: tuple[type[Exception], ...] = (
-    ReaderError,
-    OSError,
-    KeyError,
-    ValueError,
-    *STORAGE_ERRORS,
-)
 
 
 def _first_line(err: BaseException) -> str:
@@ -107,7 +81,8 @@ class BagSource:
                 self._readers = [Reader(p) for p in self.storage_paths]
             for reader in self._readers:
                 reader.open()
-        except OPEN_ERRORS as err:
+        except Exception as err:
+            # ReaderError: sqlite/apsw, zstd, struct, Memory- and OverflowError (fuzzing found)
             self.close()
             raise BagReadError(self._damaged("cannot open", err)) from err
         self._register_types()
@@ -120,7 +95,7 @@ class BagSource:
             try:
                 with Reader(path):
                     pass
-            except OPEN_ERRORS as file_err:
+            except Exception as file_err:  # noqa: BLE001 - as in __enter__
                 if path != self.path:
                     what = f"{self.path}: {doing}: file {path.name}: {_first_line(file_err)}"
                 break
@@ -239,7 +214,7 @@ class BagSource:
                     for item in reader.messages(connections=wanted):
                         got += 1
                         yield item
-            except READ_ERRORS as err:
+            except Exception as err:
                 raise BagReadError(f"{self.path}: recovering {', '.join(topics)}: {err}") from err
         if got == 0:
             raise BagReadError(

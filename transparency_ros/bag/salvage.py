@@ -43,6 +43,8 @@ from transparency_ros.bag.writer import BagWriter
 
 SALVAGED_KEY = "transparency.salvaged"
 SQLITE_BLOCK = 1000  # message ids read at once
+# what sqlite gives for damaged pages, and Python for damaged names in them (found by fuzzing)
+SQLITE_ERRORS = (sqlite3.Error, UnicodeDecodeError)
 SQLITE_EMPTY_BLOCKS = 20  # without max(id): blocks in a row with nothing readable end the search
 
 
@@ -155,7 +157,8 @@ def _sqlite_items(path: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
         readable = _padded(path, Path(tmp), damage)
         try:
             db = sqlite3.connect(f"file:{readable}?mode=ro", uri=True)
-        except sqlite3.Error as err:
+            db.text_factory = lambda raw: raw.decode("utf-8", "replace")  # damaged text too
+        except SQLITE_ERRORS as err:
             damage.append(f"{path.name}: cannot open ({_reason(err)}); nothing salvaged")
             return
         try:
@@ -189,7 +192,7 @@ def _sqlite_rows(db: sqlite3.Connection, path: Path, damage: list[str]) -> Itera
     try:
         tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master")}
         topics = db.execute("SELECT id, name, type, serialization_format FROM topics").fetchall()
-    except sqlite3.Error as err:
+    except SQLITE_ERRORS as err:
         damage.append(
             f"{path.name}: the topics table is unreadable ({_reason(err)}); nothing salvaged"
         )
@@ -199,30 +202,43 @@ def _sqlite_rows(db: sqlite3.Connection, path: Path, damage: list[str]) -> Itera
         try:
             row = db.execute("SELECT metadata FROM metadata ORDER BY id DESC LIMIT 1").fetchone()
             custom = _custom_from_yaml(row[0]) if row else {}
-        except sqlite3.Error:
+        except SQLITE_ERRORS:
             custom = {}  # the copy in metadata.yaml, if any, is used
         if custom:
             yield "custom", custom
     names: dict[int, str] = {}
     for topic_id, name, msgtype, fmt in topics:
+        if not all(isinstance(v, str) and v for v in (name, msgtype, fmt)):
+            damage.append(f"{path.name}: topic row {topic_id} is damaged ({name!r}, {msgtype!r})")
+            continue
         names[topic_id] = name
-        yield (
-            "topic",
-            Topic(name, normalise_type(msgtype), fmt, definitions.get(normalise_type(msgtype))),
-        )
+        normalised = normalise_type(msgtype)
+        yield "topic", Topic(name, normalised, fmt, definitions.get(normalised))
+    yield from _sqlite_messages(db, path, names, damage)
+
+
+def _sqlite_messages(
+    db: sqlite3.Connection, path: Path, names: dict[int, str], damage: list[str]
+) -> Iterator[Any]:
     try:
         last: int | None = db.execute("SELECT max(id) FROM messages").fetchone()[0] or 0
-    except sqlite3.DatabaseError:
+    except SQLITE_ERRORS:
         last = None  # the highest ids are lost: read on until blocks stay empty
     lost: list[tuple[int, int]] = []
-    start, empty = 1, 0
+    start, empty, bad_rows = 1, 0, 0
     while (start <= last) if last is not None else (empty < SQLITE_EMPTY_BLOCKS):
         rows = _sqlite_block(db, start, start + SQLITE_BLOCK - 1, lost)
         empty = 0 if rows else empty + 1
         for topic_id, stamp, data in rows:
-            if topic_id in names:
-                yield "message", (names[topic_id], stamp, bytes(data))
+            if topic_id not in names:
+                continue
+            if not isinstance(stamp, int) or not isinstance(data, bytes) or stamp < 0:
+                bad_rows += 1  # a damaged cell that sqlite still reads
+                continue
+            yield "message", (names[topic_id], stamp, data)
         start += SQLITE_BLOCK
+    if bad_rows:
+        damage.append(f"{path.name}: {bad_rows} message rows with damaged values; skipped")
     if lost:
         merged = _merge(lost)
         if last is None and merged[-1][1] == start - 1:  # probed past the end: open-ended
@@ -243,8 +259,9 @@ def _sqlite_definitions(
             for msgtype, encoding, text in db.execute(
                 "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"
             ):
-                definitions[normalise_type(msgtype)] = (encoding, text)
-        except sqlite3.Error as err:
+                if all(isinstance(v, str) for v in (msgtype, encoding, text)):
+                    definitions[normalise_type(msgtype)] = (encoding, text)
+        except SQLITE_ERRORS as err:
             damage.append(f"{path.name}: message definitions unreadable ({_reason(err)})")
     return definitions
 
@@ -257,7 +274,7 @@ def _sqlite_block(
             "SELECT topic_id, timestamp, data FROM messages WHERE id BETWEEN ? AND ? ORDER BY id",
             (lo, hi),
         ).fetchall()
-    except sqlite3.DatabaseError:
+    except SQLITE_ERRORS:
         if lo == hi:
             lost.append((lo, hi))
             return []
@@ -344,6 +361,16 @@ class _Types:
         return True
 
 
+def _declare(writer: BagWriter, topic: Topic, types: _Types, damage: list[str]) -> bool:
+    try:
+        writer.add(topic.name, topic.msgtype, typestore=types.store,
+                   serialization_format=topic.serialization_format)  # fmt: skip
+    except Exception as err:  # noqa: BLE001 - a damaged definition rosbags cannot write out
+        damage.append(f"topic {topic.name}: type {topic.msgtype} not writable ({_reason(err)})")
+        return False
+    return True
+
+
 class _NothingSalvagedError(Exception):
     pass
 
@@ -380,9 +407,7 @@ def salvage(
                             report.kept[value[0]] += 1
                     elif kind == "topic" and value.name not in seen:
                         seen.add(value.name)
-                        if types.known(value):
-                            writer.add(value.name, value.msgtype, typestore=types.store,
-                                       serialization_format=value.serialization_format)  # fmt: skip
+                        if types.known(value) and _declare(writer, value, types, report.damage):
                             written.add(value.name)
                     elif kind == "custom":
                         stored_custom.update(value)

@@ -252,6 +252,11 @@ def stop_command(query: Mapping[int, Res] | None = None) -> bytes:
 # --------------------------------------------------------------------------- decoding
 
 
+# a READ subframe names registers without values: its count is not bounded by the frame's
+# length, but the reply to it must fit one CAN-FD frame (64 bytes, a byte or more a register)
+MAX_READ_COUNT = 64
+
+
 class _Reader:
     def __init__(self, data: bytes) -> None:
         self.data = bytes(data)
@@ -304,6 +309,10 @@ def parse_frame(data: bytes) -> list[Subframe]:
         resolution = Res((head >> 2) & 0x3)
         count = head & 0x3 or reader.varuint()
         start = reader.varuint()
+        if op == READ and count > MAX_READ_COUNT:  # (values bound themselves: a byte or more)
+            raise MalformedFrameError(
+                f"moteus read of {count} registers at byte {reader.pos}: no reply frame holds them"
+            )
         for register in range(start, start + count):
             if op == READ:
                 subframes.append(Subframe(op, register, resolution, None))

@@ -128,6 +128,10 @@ def test_padding_and_errors() -> None:
         m.parse_frame(bytes([0x2F, 0x01, 0x00, 0x00]))
     with pytest.raises(MalformedFrameError, match="ends inside a subframe"):
         m.parse_frame(bytes([0x2C]))
+    # found by `make fuzz`: a read of 2^35 registers (varuint count) took minutes to list
+    with pytest.raises(MalformedFrameError, match="read of 34359738367 registers"):
+        m.parse_frame(bytes([0x10, 0xFF, 0xFF, 0xFF, 0xFF, 0x7F, 0x00]))
+    assert len(m.parse_frame(bytes([0x10, 64, 0x00]))) == 64  # the largest a reply can answer
     errors = m.parse_frame(bytes([0x31, 0x05, 0x02]))
     assert errors == [m.Subframe(m.READ_ERROR, 5, None, 2)]
     with pytest.raises(CanProtocolError, match=r"destination id must be 0\.\.127"):
