@@ -21,7 +21,6 @@ Nothing is written when nothing could be salvaged.
 
 from __future__ import annotations
 
-import io
 import shutil
 import sqlite3
 import tempfile
@@ -75,10 +74,14 @@ class SalvageReport:
 def _mcap_items(path: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
     """('topic', Topic) and ('message', (topic, log ns, bytes)) in file order, and
     ('custom', dict) from rosbag2's metadata record; damage noted, never raised."""
+    with path.open("rb") as stream:  # read as a stream: memory does not grow with the file
+        yield from _mcap_stream(path, stream, damage)
+
+
+def _mcap_stream(path: Path, stream: Any, damage: list[str]) -> Iterator[tuple[str, Any]]:
     schemas: dict[int, records.Schema] = {}
     channels: dict[int, str] = {}
-    data = path.read_bytes()
-    stream = io.BytesIO(data)
+    size = path.stat().st_size
 
     def handle(record: Any) -> Iterator[tuple[str, Any]]:
         if isinstance(record, records.Schema):
@@ -103,8 +106,9 @@ def _mcap_items(path: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
 
     # the summary at the end (when it survived) repeats every schema and channel: with it, the
     # messages of later chunks survive a damaged first chunk, where rosbag2 writes them
-    for record in _summary_records(data):
+    for record in _summary_records(stream):
         yield from handle(record)
+    stream.seek(0)
     good = 0  # where the last complete record ends
     try:
         for record in StreamReader(stream, emit_chunks=True).records:
@@ -123,16 +127,16 @@ def _mcap_items(path: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
             else:
                 yield from handle(record)
     except Exception as err:  # noqa: BLE001 - the framing is broken: stop where it is
-        end = "ends" if stream.tell() >= len(data) else "is broken"
+        end = "ends" if stream.tell() >= size else "is broken"
         damage.append(
-            f"{path.name}: {end} after byte {good} of {len(data)} ({_reason(err)}); "
+            f"{path.name}: {end} after byte {good} of {size} ({_reason(err)}); "
             "the records after it are lost"
         )
 
 
-def _summary_records(data: bytes) -> list[Any]:
+def _summary_records(stream: Any) -> list[Any]:
     try:
-        summary = make_reader(io.BytesIO(data)).get_summary()
+        summary = make_reader(stream).get_summary()
     except Exception:  # noqa: BLE001 - no readable summary: the stream has to do
         return []
     if summary is None:
