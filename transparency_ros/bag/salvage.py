@@ -300,12 +300,24 @@ def _merge(spans: list[tuple[int, int]]) -> list[tuple[int, int]]:
 
 
 def _custom_from_yaml(text: str) -> dict[str, str]:
+    """custom_data of a rosbag2 metadata document ({} when it has none or is damaged)."""
     try:
-        info = yaml.safe_load(text) or {}
+        info = yaml.safe_load(text)
     except yaml.YAMLError:
         return {}
-    info = info.get("rosbag2_bagfile_information", info) if isinstance(info, dict) else {}
-    custom = info.get("custom_data") if isinstance(info, dict) else None
+    return _custom_of(info)
+
+
+def _bagfile_information(info: Any) -> dict[str, Any]:
+    if isinstance(info, dict):
+        inner = info.get("rosbag2_bagfile_information", info)
+        if isinstance(inner, dict):
+            return inner
+    return {}
+
+
+def _custom_of(info: Any) -> dict[str, str]:
+    custom = _bagfile_information(info).get("custom_data")
     return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
 
 
@@ -315,18 +327,22 @@ def _metadata(bag: Path, damage: list[str]) -> tuple[dict[str, str] | None, dict
     if not meta.is_file():
         return None, {}
     try:
-        info = yaml.safe_load(meta.read_text()) or {}
-        info = info["rosbag2_bagfile_information"]
+        document = yaml.safe_load(meta.read_text())
+        info = _bagfile_information(document)
+        if not info:
+            raise ValueError("no rosbag2_bagfile_information")
         counts = {
-            t["topic_metadata"]["name"]: int(t["message_count"])
-            for t in info.get("topics_with_message_count", [])
+            str(t["topic_metadata"]["name"]): int(t["message_count"])
+            for t in info.get("topics_with_message_count") or []
         }
+        if not isinstance(info.get("custom_data") or {}, dict):
+            raise TypeError("custom_data is not a mapping")
     except (yaml.YAMLError, KeyError, TypeError, ValueError, UnicodeDecodeError) as err:
         damage.append(
             f"metadata.yaml: unreadable ({_reason(err)}); custom_data taken from the storage"
         )
         return None, {}
-    return _custom_from_yaml(yaml.safe_dump({"custom_data": info.get("custom_data") or {}})), counts
+    return _custom_of(info), counts
 
 
 # ------------------------------------------------------------------------------ salvage
