@@ -51,7 +51,9 @@ def deferred_interrupts() -> Iterator[None]:
     """SIGINT and SIGTERM arriving in the block take effect when it ends (the first one).
 
     Only the main thread can install signal handlers; elsewhere (where Python never runs them
-    anyway) this does nothing."""
+    anyway) this does nothing. Handlers installed below Python (rclpy's, which shut its contexts
+    down and then call Python's) are not restored: afterwards the signal goes to Python's
+    handler directly, and the clean-up it unwinds through shuts the contexts down instead."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
