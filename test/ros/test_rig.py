@@ -6,7 +6,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -16,6 +15,7 @@ import pytest
 pytest.importorskip("rclpy")
 from mcap.reader import make_reader
 
+from test.ros.conftest import wait_for
 from transparency_ros.analysis.drop_eval import IncompleteTrialError, evaluate, evaluate_trial
 from transparency_ros.bag.reader import joint_series, open_bag, scalar_series
 from transparency_ros.core.contact_model import model_for
@@ -81,7 +81,7 @@ def test_a_signal_during_a_trial_leaves_bags_that_open(tmp_path: Path, how: int)
     partial = second.with_name(second.name + ".partial")
     try:
         # the second trial's bag is open while it records (the drop takes 0.47 s + 0.3 s)
-        assert wait_until(partial.exists, 90.0), "the second trial never started recording"
+        assert wait_for(partial.exists, 90.0), "the second trial never started recording"
         time.sleep(0.3)
         sent = time.time()
         proc.send_signal(how)
@@ -120,12 +120,3 @@ def test_an_unwritable_output_directory_is_refused_before_any_trial(tmp_path: Pa
     assert done.returncode == 2
     assert "error: cannot create bag directory" in done.stderr and str(blocker) in done.stderr
     assert "[1/" not in done.stderr  # no trial was started
-
-
-def wait_until(condition: Callable[[], bool], timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.01)
-    return False
