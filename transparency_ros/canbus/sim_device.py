@@ -394,13 +394,30 @@ class SimulatedActuator:
         return self
 
     def stop(self) -> None:
+        """Switch the device off. Frames already on the wire to it are taken first, as a real
+        device takes them: on a loaded machine the thread can lag, and the disable frames sent
+        just before would otherwise be lost here, not on the bus."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
         if self._bus is not None:
+            self._take_pending(self._bus)
             self._bus.shutdown()
             self._bus = None
+
+    def _take_pending(self, bus: can.BusABC) -> None:
+        with self.lock:
+            while True:
+                try:
+                    msg = bus.recv(timeout=0.0)
+                except (can.CanError, OSError):
+                    return
+                if msg is None:
+                    return
+                self.frames_received += 1
+                if not (self.faults.refuse_enable and not self.personality.is_enabled()):
+                    self.personality.handle(to_frame(msg), self.physics, self.clock())
 
     def __enter__(self) -> SimulatedActuator:
         return self.start()
