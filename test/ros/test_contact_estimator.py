@@ -265,7 +265,8 @@ def test_with_the_driver_the_event_stamp_is_a_joint_state_stamp(
         rig.commands_pub.publish(JointState(name=["joint"], position=[0.5]))
         assert wait_for(lambda: len(rig.contacts) >= 1)
         onset = stamp_of(rig.contacts[0])
-        assert min(abs(onset - s) for s in driver_states) < 1e-9
+        # the probe may get the crossing sample after the onset event (two topics, two paths)
+        assert wait_for(lambda: min(abs(onset - s) for s in driver_states) < 1e-9)
         assert rig.contacts[0].header.frame_id == "joint"
         # in-process: no DDS reader of /joint_states on the estimator, the probe's is the only one
         assert driver._joint_pub.get_subscription_count() == (1 if in_process else 2)
