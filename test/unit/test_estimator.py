@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from transparency_ros.core.actuator_physics import (
     ActuatorPhysics,
@@ -15,6 +18,7 @@ from transparency_ros.core.actuator_physics import (
 )
 from transparency_ros.core.config import get_actuator
 from transparency_ros.core.estimator import (
+    ContactEvent,
     ContactLevel,
     DetectorSettings,
     EstimatorError,
@@ -164,3 +168,50 @@ def test_a_sample_is_taken_whole_or_not_at_all() -> None:
     assert pipeline.rejected == {"out_of_range": 1} and pipeline.samples == 0
     estimates, events = pipeline.sample(1.0, ["a", "b"], [-0.5, 0.0], [])  # same stamp: fine
     assert [e.joint for e in estimates] == ["a", "b"] and [e.joint for e in events] == ["a"]
+
+
+_values = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([0.0, 0.09, 0.11, -0.2, 1e308, -1e308]),
+)
+_samples = st.lists(
+    st.tuples(
+        st.one_of(st.floats(-10.0, 10.0), st.sampled_from([math.nan, math.inf, 1.0])),
+        st.lists(st.sampled_from(["a", "b", "x"]), max_size=3),
+        st.lists(_values, max_size=3),
+        st.lists(_values, max_size=3),
+    ),
+    max_size=60,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_samples)
+def test_any_stream_of_samples_is_taken_or_rejected_and_counted(
+    stream: list[tuple[float, list[str], list[float], list[float]]],
+) -> None:
+    """Whatever arrives: no exception but a counted rejection; every sample either taken or
+    rejected; events only from taken samples, their stamps increasing per joint, and the
+    contact state alternating onset / release."""
+    pipeline = EstimatorPipeline(joints=frozenset({"a", "b"}))
+    pipeline.detector = SchmittDetector(DetectorSettings(0.1, 0.05))
+    taken: dict[str, list[float]] = {}
+    events: dict[str, list[ContactEvent]] = {}
+    for stamp, names, positions, velocities in stream:
+        try:
+            estimates, new = pipeline.sample(stamp, names, positions, velocities)
+        except SampleRejectedError:
+            continue
+        assert all(math.isfinite(e.torque_nm) and math.isfinite(e.error_rad) for e in estimates)
+        for name in names:
+            taken.setdefault(name, []).append(stamp)
+        for event in new:
+            assert event.stamp_s == stamp
+            events.setdefault(event.joint, []).append(event)
+    assert pipeline.samples + sum(pipeline.rejected.values()) == len(stream)
+    for stamps in taken.values():
+        assert all(b > a for a, b in itertools.pairwise(stamps))
+    for joint_events in events.values():
+        kinds = [e.kind for e in joint_events]
+        assert kinds[::2] == [EventKind.CONTACT_ONSET] * len(kinds[::2])
+        assert kinds[1::2] == [EventKind.RELEASE] * len(kinds[1::2])

@@ -346,6 +346,8 @@ class EstimatorPipeline:
     def _check_arrays(self, names: list[str], arrays: dict[str, list[float]]) -> None:
         if not names:
             raise self.reject("no_names", "a sample must name its joints")
+        if len(set(names)) != len(names):  # found by hypothesis: one joint updated twice
+            raise self.reject("duplicate_joint", f"a joint named twice in {names}")
         for label, values in arrays.items():
             if values and len(values) != len(names):
                 raise self.reject(
