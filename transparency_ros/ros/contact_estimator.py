@@ -222,7 +222,9 @@ class ContactEstimatorNode(Node):
     def destroy_node(self) -> None:
         if self._leave_in_process is not None:
             self._leave_in_process()
-        self.hot_path.stop()
+        if not self.hot_path.stop():
+            self.get_logger().error("hot path thread still running: node left undestroyed")
+            return
         super().destroy_node()
 
     # ----------------------------------------------------------------- parameters

@@ -59,8 +59,10 @@ class Unserved(CallbackGroup):
 class Delivery:
     """What reached a subscription, and what the DDS layer lost on the way, from the
     publication sequence numbers: a gap is samples the publisher sent that never arrived (the
-    subscription's queue overflowed in a burst, or the network dropped them). Exact for one
-    publisher; with several, their numbers interleave (``publishers`` tells the reader)."""
+    subscription's queue overflowed in a burst, or the network dropped them). Counted from the
+    first sample received (what came before it may have been sent before the subscription
+    matched). Exact for one publisher; with several, their numbers interleave (the estimator
+    then reports the loss as unknown)."""
 
     received: int = 0
     lost: int = 0
@@ -97,7 +99,7 @@ class HotPath:
         self._thread: threading.Thread | None = None
         self.handler_errors = 0
         self._last_error_log = -1e9
-        node.context.on_shutdown(self.stop)
+        node.context.on_shutdown(self._stop_at_shutdown)
 
     def subscribe(self, msg_type: Any, topic: str, qos: QoSProfile | int, handler: Handler) -> Any:
         if self._thread is not None:
@@ -119,8 +121,13 @@ class HotPath:
         )
         self._thread.start()
 
-    def stop(self) -> None:
-        """Stop the thread and wait for it (not from a handler); idempotent."""
+    def _stop_at_shutdown(self) -> None:
+        self.stop()
+
+    def stop(self) -> bool:
+        """Stop the thread and wait for it (not from a handler); idempotent. False when it is
+        still running after 5 s: then the node must not be destroyed (rclpy's destroy_node
+        busy-waits, holding the GIL, while the thread holds the subscription's handle)."""
         self._stopping.set()
         # the context may be gone already; then the wait's timeout ends it
         with contextlib.suppress(Exception):
@@ -128,6 +135,8 @@ class HotPath:
         thread = self._thread
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=5.0)
+            return not thread.is_alive()
+        return True
 
     def _set_priority(self) -> None:
         try:
