@@ -21,8 +21,9 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from transparency_ros.bag.errors import BagReadError
+from transparency_ros.bag.keys import SALVAGED_KEY
 from transparency_ros.bag.reader import joint_series, open_bag
-from transparency_ros.bag.salvage import SALVAGED_KEY, salvage
+from transparency_ros.bag.salvage import salvage
 from transparency_ros.bag.writer import BagWriter
 from transparency_ros.cli import main
 from transparency_ros.core.cdr import encode_joint_state, encode_wrench_stamped

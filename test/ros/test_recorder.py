@@ -16,8 +16,9 @@ from sensor_msgs.msg import JointState
 
 from test.ros.conftest import Spinner, wait_for
 from transparency_ros.bag.errors import BagWriteError
+from transparency_ros.bag.keys import INTERRUPTED_KEY
 from transparency_ros.bag.reader import joint_series, open_bag
-from transparency_ros.bag.writer import INTERRUPTED_KEY, BagWriter
+from transparency_ros.bag.writer import BagWriter
 from transparency_ros.core.interrupts import Terminated, terminate_like_interrupt
 from transparency_ros.ros.recorder import Recorder
 

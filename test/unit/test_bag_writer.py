@@ -13,9 +13,9 @@ import pytest
 from mcap.reader import make_reader
 
 from transparency_ros.bag.errors import BagWriteError
+from transparency_ros.bag.keys import INTERRUPTED_KEY
 from transparency_ros.bag.reader import open_bag, scalar_series
 from transparency_ros.bag.writer import (
-    INTERRUPTED_KEY,
     BagWriter,
     check_writable,
     message_types,

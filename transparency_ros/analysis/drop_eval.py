@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from transparency_ros.bag.errors import BagReadError
+from transparency_ros.bag.keys import INTERRUPTED_KEY
 from transparency_ros.bag.reader import (
     BagSource,
     find_bags,
@@ -28,7 +29,6 @@ from transparency_ros.bag.reader import (
     open_bag,
     scalar_series,
 )
-from transparency_ros.bag.writer import INTERRUPTED_KEY
 from transparency_ros.core.config import load_drop_test
 from transparency_ros.core.estimator import (
     DetectorSettings,

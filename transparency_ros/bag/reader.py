@@ -53,6 +53,14 @@ def normalise_type(name: str) -> str:
     return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
 
 
+def register_definition(typestore: Any, msgtype: str, text: str, *, idl: bool) -> dict[str, Any]:
+    """Add the types of a definition a bag embeds (.msg text, or IDL) to ``typestore``; the
+    types added. Raises whatever the parser raises on a definition it cannot read."""
+    types = get_types_from_idl(text) if idl else get_types_from_msg(text, msgtype)
+    typestore.register(types)
+    return dict(types)
+
+
 @dataclass(frozen=True)
 class TopicInfo:
     msgtype: str
@@ -164,11 +172,8 @@ class BagSource:
             if name in known or c.msgdef is None or not c.msgdef.data.strip():
                 continue
             try:
-                if c.msgdef.format == MessageDefinitionFormat.IDL:
-                    types = get_types_from_idl(c.msgdef.data)
-                else:
-                    types = get_types_from_msg(c.msgdef.data, name)
-                self.typestore.register(types)
+                idl = c.msgdef.format == MessageDefinitionFormat.IDL
+                types = register_definition(self.typestore, name, c.msgdef.data, idl=idl)
                 known |= set(types)
             except Exception as err:  # noqa: BLE001 - any parser failure: name the topic
                 # other topics stay readable; reading this one raises (see messages())

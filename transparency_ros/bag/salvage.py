@@ -34,13 +34,13 @@ import yaml
 from mcap import records
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader, breakup_chunk
-from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+from rosbags.typesys import Stores, get_typestore
 
 from transparency_ros.bag.errors import BagReadError
-from transparency_ros.bag.reader import STORAGE_SUFFIXES, normalise_type
+from transparency_ros.bag.keys import SALVAGED_KEY
+from transparency_ros.bag.reader import STORAGE_SUFFIXES, normalise_type, register_definition
 from transparency_ros.bag.writer import BagWriter
 
-SALVAGED_KEY = "transparency.salvaged"
 SQLITE_BLOCK = 1000  # message ids read at once
 # what sqlite gives for damaged pages, and Python for damaged names in them (found by fuzzing)
 SQLITE_ERRORS = (sqlite3.Error, UnicodeDecodeError)
@@ -368,11 +368,7 @@ class _Types:
             if topic.definition is None:
                 raise KeyError("not defined in the bag")
             encoding, text = topic.definition
-            if encoding == "ros2idl":
-                types = get_types_from_idl(text)
-            else:
-                types = get_types_from_msg(text, topic.msgtype)
-            self.store.register(types)
+            register_definition(self.store, topic.msgtype, text, idl=encoding == "ros2idl")
         except Exception as err:  # noqa: BLE001 - any parser failure: that topic is left out
             self.damage.append(
                 f"topic {topic.name}: type {topic.msgtype} unknown ({_reason(err)}); left out"

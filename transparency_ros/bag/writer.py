@@ -28,11 +28,10 @@ from rosbags.rosbag2 import (
 from rosbags.typesys import Stores, get_typestore
 
 from transparency_ros.bag.errors import BagWriteError
+from transparency_ros.bag.keys import INTERRUPTED_KEY
 from transparency_ros.core.interrupts import deferred_interrupts, interruption_name
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-# custom_data of a bag closed by Ctrl-C or SIGTERM: which signal ended it (an incomplete trial)
-INTERRUPTED_KEY = "transparency.interrupted"
 MIN_FREE_BYTES = 50 * 1024 * 1024
 
 

@@ -66,22 +66,19 @@ class Delivery:
 
     received: int = 0
     lost: int = 0
-    restarts: int = 0  # the sequence went back: a new publisher, or several interleaved
     last: int | None = None
 
     def note(self, sequence: int | None) -> None:
         self.received += 1
         if sequence is None:  # an RMW without sequence numbers
             return
-        if self.last is not None:
-            if sequence > self.last + 1:
-                self.lost += sequence - self.last - 1
-            elif sequence <= self.last:
-                self.restarts += 1
+        # (a sequence going back: a new publisher, or several interleaved; not a loss)
+        if self.last is not None and sequence > self.last + 1:
+            self.lost += sequence - self.last - 1
         self.last = sequence
 
     def reset(self) -> None:
-        self.received = self.lost = self.restarts = 0
+        self.received = self.lost = 0
 
 
 class HotPath:
