@@ -125,11 +125,14 @@ def test_fast_and_deserializing_series_are_identical(
             joint_series(bag, "/joint_states", "b"),
             scalar_series(bag, "/point", "geometry_msgs/msg/PointStamped", "point.z"),
         )
-    for name in ("stamp_s", "position", "velocity", "effort"):
+    for name in ("stamp_ns", "position", "velocity", "effort"):
         a, b = getattr(fast[0], name), getattr(slow[0], name)
         assert np.array_equal(a, b, equal_nan=True), name
     assert np.array_equal(fast[0].position, values[:, 1])
-    assert np.array_equal(fast[1], slow[1])
+    stamps = [1_700_000_000_000_000_000 + i * 1_000_003 for i in range(len(values))]
+    assert fast[0].stamp_ns.tolist() == stamps  # exact integer nanoseconds, both paths
+    assert fast[1].stamp_ns.tolist() == slow[1].stamp_ns.tolist() == stamps
+    assert np.array_equal(fast[1].value, slow[1].value)
 
 
 def test_messages_outside_chunks_are_not_skipped(tmp_path: Path) -> None:

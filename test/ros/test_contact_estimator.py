@@ -73,6 +73,11 @@ class Rig:
         msg.header.stamp.sec, msg.header.stamp.nanosec = int(sec), round((stamp_s - sec) * 1e9)
         self.states_pub.publish(msg)
 
+    def send_ns(self, stamp_ns: int, position: float, name: str = "arm") -> None:
+        msg = JointState(name=[name], position=[position])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+        self.states_pub.publish(msg)
+
     def close(self) -> None:
         self.spinner.stop()
         self.node.destroy_node()
@@ -122,6 +127,37 @@ def test_onset_and_release_events_carry_the_crossing_stamps(rig_factory: Any) ->
         UInt8, "/contact_estimator/state/arm", lambda m: late.append(m.data), latched
     )
     assert wait_for(lambda: late == [0])
+
+
+def stamp_ns_of(msg: Any) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+@pytest.mark.parametrize("base_s", [1_800_000_000, 2**31 - 2], ids=["1.8e9 s", "2^31 s"])
+def test_event_stamps_equal_their_sample_stamps_to_the_nanosecond(
+    rig_factory: Any, base_s: int
+) -> None:
+    """100 onsets stamped this decade and just below 2^31 s, at odd nanoseconds: every /contact
+    and /contact_release stamp is its sample's stamp, exactly, as message_filters' ExactTime
+    needs (through float seconds 96 of 100 came back 10-50 ns off)."""
+    rig = rig_factory(contact_onset_rad=0.1, contact_release_rad=0.05, onset_dwell_s=0.0005)
+    base = base_s * 1_000_000_000 + 10_000_000
+    crossings, confirms, releases = [], [], []
+    for k in range(100):
+        t = base + k * 7_777_777 + (k * 37) % 1000  # odd nanoseconds
+        # theta_d = 0: error = -position; crossing, dwell confirmed 0.6 ms later, release
+        for dt, pos in ((0, 0.0), (1_000_003, -0.2), (1_600_011, -0.2), (2_000_017, 0.0)):
+            rig.send_ns(t + dt, pos)
+        crossings.append(t + 1_000_003)
+        confirms.append(t + 1_600_011)
+        releases.append(t + 2_000_017)
+        if k % 10 == 9:  # let the estimator keep up with the probe's publisher queue
+            assert wait_for(lambda n=4 * (k + 1): len(rig.estimates) == n)
+    assert wait_for(lambda: len(rig.releases) == 100)
+    assert [stamp_ns_of(m) for m in rig.contacts] == crossings  # not the confirming sample's
+    assert [stamp_ns_of(m) for m in rig.releases] == releases
+    sample_stamps = [stamp_ns_of(m) for m in rig.estimates]
+    assert set(crossings) | set(confirms) | set(releases) <= set(sample_stamps)
 
 
 def test_collision_level_and_commanded_theta_d(rig_factory: Any) -> None:

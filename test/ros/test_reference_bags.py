@@ -22,7 +22,7 @@ from test.ros.conftest import Spinner, wait_for  # noqa: E402
 from transparency_ros.analysis.drop_eval import evaluate, offline_onset  # noqa: E402
 from transparency_ros.bag.reader import joint_series, open_bag  # noqa: E402
 from transparency_ros.ros.contact_estimator import ContactEstimatorNode  # noqa: E402
-from transparency_ros.ros.conversions import stamp_to_s  # noqa: E402
+from transparency_ros.ros.conversions import stamp_to_ns  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[2]
@@ -53,7 +53,7 @@ def test_the_offline_estimator_gives_the_recorded_onset(bag: Path) -> None:
     """What `transparency eval` uses for a bag without /contact: the node's core, replayed."""
     with open_bag(bag) as source:
         custom = source.custom_data
-        recorded = [stamp_to_s(m.header.stamp) for _, _, m in source.messages(["/contact"])]
+        recorded = [stamp_to_ns(m.header.stamp) for _, _, m in source.messages(["/contact"])]
         onset = offline_onset(
             source, float(custom["transparency.k_s"]), float(custom["transparency.threshold_rad"])
         )
@@ -61,15 +61,15 @@ def test_the_offline_estimator_gives_the_recorded_onset(bag: Path) -> None:
         assert onset is None
         return
     assert onset is not None
-    assert onset[0] == pytest.approx(recorded[0], abs=1e-6)
+    assert onset[0] == recorded[0]  # the same sample's stamp, to the nanosecond
 
 
 @pytest.mark.parametrize("bag", BAGS, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_replayed_bag_gives_the_recorded_onset(bag: Path, ros_context: Context) -> None:
     with open_bag(bag) as source:
         custom = source.custom_data
-        recorded = [stamp_to_s(m.header.stamp) for _, _, m in source.messages(["/contact"])]
-        samples = joint_series(source, "/joint_states").stamp_s
+        recorded = [stamp_to_ns(m.header.stamp) for _, _, m in source.messages(["/contact"])]
+        samples = joint_series(source, "/joint_states").stamp_ns
         # theta_d of the trial (the estimator had it before the recording started)
         theta_d = float(joint_series(source, "/joint_commands").position[-1])
     estimator = ContactEstimatorNode(
@@ -82,9 +82,9 @@ def test_replayed_bag_gives_the_recorded_onset(bag: Path, ros_context: Context) 
         ],
     )
     probe = Node("replay_probe", context=ros_context)
-    onsets: list[float] = []
+    onsets: list[int] = []
     probe.create_subscription(
-        WrenchStamped, "/contact", lambda m: onsets.append(stamp_to_s(m.header.stamp)), 100
+        WrenchStamped, "/contact", lambda m: onsets.append(stamp_to_ns(m.header.stamp)), 100
     )
     spinner = Spinner(ros_context, estimator, probe)
     try:
@@ -100,7 +100,9 @@ def test_replayed_bag_gives_the_recorded_onset(bag: Path, ros_context: Context) 
             assert not wait_for(lambda: bool(onsets), 0.5)
             return
         assert wait_for(lambda: bool(onsets), 5.0)
-        # the same sample, or its neighbour if a sample was lost in transport
+        # the same sample, or its neighbour if a sample was lost in transport; either way the
+        # onset carries the stamp of a recorded sample, exactly
+        assert onsets[0] in set(samples.tolist())
         index = np.searchsorted(samples, recorded[0])
         got = np.searchsorted(samples, onsets[0])
         assert abs(int(got) - int(index)) <= 1, onsets[0] - recorded[0]

@@ -7,6 +7,8 @@ Per trial, as in Sec. 3.1 of the paper:
 * t_e: the first recorded /contact onset after t_t, or, in a bag without one, the estimator
   replayed offline on /joint_states (eq. 1 and the threshold of the bag's custom_data);
 * t_r = t_e - t_t; v_s,e from a local quadratic fit of the height around t_e;
+* stamps are compared as integer nanoseconds (t_t_ns, t_e_ns are header stamps, exact) and
+  become float seconds only as differences;
 * Delta E = 1/2 m_s (v_s,t^2 - v_s,e^2) (eq. 4); F_mu = the load cell at t_e; F_est = tau_hat / r.
 """
 
@@ -28,6 +30,7 @@ from transparency_ros.bag.reader import (
     joint_series,
     open_bag,
     scalar_series,
+    stamp_ns,
 )
 from transparency_ros.core.config import load_drop_test
 from transparency_ros.core.estimator import (
@@ -38,6 +41,7 @@ from transparency_ros.core.estimator import (
     SchmittDetector,
 )
 
+NS_PER_S = 1_000_000_000
 CUSTOM_KEYS = (
     "transparency.actuator",
     "transparency.k_s",
@@ -54,7 +58,7 @@ class TrialMetrics:
     actuator: str
     drop_height_m: float
     shuttle_mass_kg: float
-    t_t_s: float | None  # ROS time of true contact
+    t_t_s: float | None  # ROS time of true contact [s] (display; t_t_ns is exact)
     energy_j: float | None  # T
     v_s_t_m_s: float | None
     detected: bool
@@ -64,6 +68,8 @@ class TrialMetrics:
     delta_e_j: float | None
     f_measured_n: float | None  # load cell at t_e
     f_estimated_n: float | None  # tau_hat / r at t_e
+    t_t_ns: int | None = None  # stamp of the load-cell sample of true contact
+    t_e_ns: int | None = None  # stamp of the sample that crossed the threshold
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -74,8 +80,8 @@ def _quadratic_velocity(t: np.ndarray, h: np.ndarray, at_s: float) -> float:
     return float(coef[1])  # d/dt at t = at_s
 
 
-def offline_onset(bag: BagSource, k_s: float, threshold: float) -> tuple[float, float] | None:
-    """(stamp, tau_hat) of the first onset of the estimator replayed on /joint_states."""
+def offline_onset(bag: BagSource, k_s: float, threshold: float) -> tuple[int, float] | None:
+    """(stamp [ns], tau_hat) of the first onset of the estimator replayed on /joint_states."""
     states = joint_series(bag, "/joint_states")
     theta_d = 0.0
     if "/joint_commands" in bag.topics:
@@ -92,11 +98,11 @@ def offline_onset(bag: BagSource, k_s: float, threshold: float) -> tuple[float, 
         default_theta_d_rad=theta_d,
     )
     velocity = np.nan_to_num(states.velocity)
-    for stamp, position, speed in zip(states.stamp_s, states.position, velocity, strict=True):
-        _, events = pipeline.sample(float(stamp), ["joint"], [float(position)], [float(speed)])
+    for stamp, position, speed in zip(states.stamp_ns, states.position, velocity, strict=True):
+        _, events = pipeline.sample(int(stamp), ["joint"], [float(position)], [float(speed)])
         for event in events:
             if event.kind is EventKind.CONTACT_ONSET:
-                return event.stamp_s, event.torque_nm
+                return event.stamp_ns, event.torque_nm
     return None
 
 
@@ -124,43 +130,49 @@ def evaluate_trial(path: str | Path, fit_window_s: float = 0.015) -> TrialMetric
             bag, "/load_cell", "geometry_msgs/msg/WrenchStamped", "wrench.force.z"
         )
         shuttle = scalar_series(bag, "/shuttle/height", "geometry_msgs/msg/PointStamped", "point.z")
-        above = np.nonzero(force[:, 1] > drop.contact_force_threshold_n)[0]
+        above = np.nonzero(force.value > drop.contact_force_threshold_n)[0]
         none = TrialMetrics(str(path), actuator, height, mass, None, None, None, False, "none",
                             None, None, None, None, None)  # fmt: skip
         if above.size == 0:
             return none
-        t_t = float(force[above[0], 0])
-        before = (shuttle[:, 0] >= t_t - fit_window_s) & (shuttle[:, 0] < t_t - 2e-4)
+        t_t_ns = int(force.stamp_ns[above[0]])
+        # windows are chosen on exact nanosecond differences (no sample flips in or out with
+        # the rounding of epoch seconds); the fits then run in seconds since t_t
+        since_ns = shuttle.stamp_ns - t_t_ns
+        t_shuttle = since_ns * 1e-9
+        before = (since_ns >= -round(fit_window_s * 1e9)) & (since_ns < -200_000)
         if np.count_nonzero(before) < 10:
             raise BagReadError(f"{path}: /shuttle/height has too few samples before contact")
-        v_t = _quadratic_velocity(shuttle[before, 0], shuttle[before, 1], t_t)
+        v_t = _quadratic_velocity(t_shuttle[before], shuttle.value[before], 0.0)
         energy = 0.5 * mass * v_t**2
-        onset: tuple[float, float] | None = None
+        onset: tuple[int, float] | None = None
         source = "none"
         if "/contact" in bag.topics and bag.topics["/contact"].count > 0:
             for _topic, _log, msg in bag.messages(["/contact"]):
-                stamp = float(msg.header.stamp.sec) + msg.header.stamp.nanosec * 1e-9
-                if stamp >= t_t - 0.002:
+                stamp = stamp_ns(msg.header)
+                if stamp >= t_t_ns - 2_000_000:  # 2 ms
                     onset, source = (stamp, float(msg.wrench.torque.z)), "recorded /contact"
                     break
         if onset is None:
             onset = offline_onset(bag, k_s, threshold)
             source = "offline estimator" if onset is not None else "none"
+    t_t = t_t_ns / NS_PER_S
     base = TrialMetrics(str(path), actuator, height, mass, t_t, energy, v_t, False, source,
-                        None, None, None, None, None)  # fmt: skip
+                        None, None, None, None, None, t_t_ns)  # fmt: skip
     if onset is None:
         return base
-    t_e, tau_hat = onset
-    near = np.abs(shuttle[:, 0] - t_e) <= 0.001
+    t_e_ns, tau_hat = onset
+    t_r = (t_e_ns - t_t_ns) * 1e-9
+    near = np.abs(since_ns - (t_e_ns - t_t_ns)) <= 1_000_000  # 1 ms
     v_e = (
-        _quadratic_velocity(shuttle[near, 0], shuttle[near, 1], t_e)
+        _quadratic_velocity(t_shuttle[near], shuttle.value[near], t_r)
         if near.sum() >= 5
         else math.nan
     )
-    f_mu = float(np.interp(t_e, force[:, 0], force[:, 1]))
+    f_mu = float(np.interp(t_r, force.seconds(t_t_ns), force.value))
     return TrialMetrics(str(path), actuator, height, mass, t_t, energy, v_t, True, source,
-                        t_e - t_t, v_e, 0.5 * mass * (v_t**2 - v_e**2), f_mu,
-                        abs(tau_hat) / arm)  # fmt: skip
+                        t_r, v_e, 0.5 * mass * (v_t**2 - v_e**2), f_mu,
+                        abs(tau_hat) / arm, t_t_ns, t_e_ns)  # fmt: skip
 
 
 def evaluate(

@@ -112,9 +112,9 @@ def _score(name: str, unit: str, signal: np.ndarray, threshold: float,
         DetectorSettings(contact_onset=threshold, contact_release=threshold / 2)
     )
     onsets = [
-        ev.stamp_s
+        ev.stamp_ns * 1e-9
         for t, value in zip(rec.t_s, signal, strict=True)
-        for ev in detector.update("j", float(t), float(value), 0.0)
+        for ev in detector.update("j", round(t * 1e9), float(value), 0.0)
         if ev.kind.value == "contact_onset"
     ]
     delays: list[float] = []

@@ -112,8 +112,9 @@ def simulate_cell(actuator_name: str, ball_name: str, setup: FeelCageSetup,
         cage_position_rad=geometry.cage_position_rad,
         process_time_s=setup.process_time_s,
     )
-    dt = 1.0 / setup.sample_rate_hz
-    t = 0.0
+    dt_ns = round(1e9 / setup.sample_rate_hz)
+    dt = dt_ns * 1e-9
+    t_ns, t = 0, 0.0  # the sample clock in integer nanoseconds, as stamps are
     state = fc.BehaviorState(fc.Phase.SWEEP, 0.0, theta_d0)
     command: fc.Command | None = fc.Sweep(theta_d0, config.sweep_speed_rad_s)
     lost_s: float | None = None
@@ -122,7 +123,8 @@ def simulate_cell(actuator_name: str, ball_name: str, setup: FeelCageSetup,
     while t < horizon:
         law = _law(command, setup.k_s_nm_per_rad)
         physics.advance(dt, law)
-        t += dt
+        t_ns += dt_ns
+        t = t_ns * 1e-9
         if lost_s is None and env.lost:
             lost_s = t
         if state.phase in (fc.Phase.CAGED, fc.Phase.LOST):
@@ -134,8 +136,8 @@ def simulate_cell(actuator_name: str, ball_name: str, setup: FeelCageSetup,
         position = physics.measured_position_rad
         if state.phase is fc.Phase.SWEEP and isinstance(command, fc.Sweep):
             error = command.position_rad - position
-            for event in detector.update("arm", t, error, setup.k_s_nm_per_rad * error):
-                state = fc.on_contact(state, event.stamp_s)
+            for event in detector.update("arm", t_ns, error, setup.k_s_nm_per_rad * error):
+                state = fc.on_contact(state, event.stamp_ns * 1e-9)
         # the ball counts as lost once it passed the exit before the gate closed
         state, command = fc.step(
             state, config, t, position, ball_lost=env.lost and state.phase is not fc.Phase.CAGED

@@ -286,16 +286,49 @@ def find_bags(paths: Sequence[str | Path]) -> list[Path]:
 # --------------------------------------------------------------------- arrays
 
 
+NS_PER_S = 1_000_000_000
+
+
+def stamp_ns(header: Any) -> int:
+    """A header's stamp as integer nanoseconds (exact)."""
+    return int(header.stamp.sec) * NS_PER_S + int(header.stamp.nanosec)
+
+
 def stamp_s(header: Any) -> float:
+    """A header's stamp as float seconds (about 240 ns resolution at today's epoch: for
+    display; compare stamps with :func:`stamp_ns`)."""
     return float(header.stamp.sec) + float(header.stamp.nanosec) * 1e-9
 
 
+class _Stamped:
+    stamp_ns: np.ndarray
+
+    @property
+    def stamp_s(self) -> np.ndarray:
+        """Stamps as float seconds: for fitting and plots, not for matching stamps (at today's
+        epoch a float64 second resolves about 240 ns)."""
+        return self.seconds(0)
+
+    def seconds(self, origin_ns: int) -> np.ndarray:
+        """Seconds since ``origin_ns`` (exact differences first, then float)."""
+        return np.asarray((self.stamp_ns - np.int64(origin_ns)) * 1e-9, dtype=float)
+
+
 @dataclass(frozen=True)
-class JointSeries:
-    stamp_s: np.ndarray  # (n,)
+class JointSeries(_Stamped):
+    stamp_ns: np.ndarray  # (n,) int64: header stamps, exact
     position: np.ndarray  # (n,)
     velocity: np.ndarray  # (n,), NaN where absent
     effort: np.ndarray  # (n,), NaN where absent
+
+
+@dataclass(frozen=True)
+class ScalarSeries(_Stamped):
+    stamp_ns: np.ndarray  # (n,) int64: header stamps, exact
+    value: np.ndarray  # (n,)
+
+    def __len__(self) -> int:
+        return int(self.stamp_ns.size)
 
 
 def _fields(bag: BagSource, topic: str) -> FieldArrays | None:
@@ -307,7 +340,7 @@ def _fields(bag: BagSource, topic: str) -> FieldArrays | None:
 
 def _stamps(fields: FieldArrays) -> np.ndarray:
     sec, nanosec = fields.fields["header.stamp.sec"], fields.fields["header.stamp.nanosec"]
-    return np.asarray(sec.astype(float) + nanosec.astype(float) * 1e-9)  # as stamp_s()
+    return sec.astype(np.int64) * NS_PER_S + nanosec.astype(np.int64)  # as stamp_ns()
 
 
 def _fast_joint_series(bag: BagSource, topic: str, joint: str | None) -> JointSeries | None:
@@ -317,7 +350,7 @@ def _fast_joint_series(bag: BagSource, topic: str, joint: str | None) -> JointSe
     names = list(bag.typestore.deserialize_cdr(fields.first_message, JOINT_STATE).name)
     if joint is not None and joint not in names:
         empty = np.empty(0)
-        return JointSeries(empty, empty, empty, empty)
+        return JointSeries(np.empty(0, dtype=np.int64), empty, empty, empty)
     index = names.index(joint) if joint is not None else 0
     stamp = _stamps(fields)
     order = np.argsort(stamp, kind="stable")
@@ -335,7 +368,8 @@ def joint_series(bag: BagSource, topic: str, joint: str | None = None) -> JointS
     fast = _fast_joint_series(bag, topic, joint)
     if fast is not None:
         return fast
-    rows: list[tuple[float, float, float, float]] = []
+    stamps: list[int] = []
+    rows: list[tuple[float, float, float]] = []
     for _topic, _log, msg in bag.messages([topic]):
         names = list(msg.name)
         index = names.index(joint) if joint is not None and joint in names else 0
@@ -345,27 +379,30 @@ def joint_series(bag: BagSource, topic: str, joint: str | None = None) -> JointS
         def at(values: Any, i: int = index) -> float:
             return float(values[i]) if len(values) > i else float("nan")
 
-        rows.append((stamp_s(msg.header), at(msg.position), at(msg.velocity), at(msg.effort)))
-    data = np.array(rows, dtype=float).reshape(-1, 4)
-    order = np.argsort(data[:, 0], kind="stable")
-    data = data[order]
-    return JointSeries(data[:, 0], data[:, 1], data[:, 2], data[:, 3])
+        stamps.append(stamp_ns(msg.header))
+        rows.append((at(msg.position), at(msg.velocity), at(msg.effort)))
+    stamp = np.array(stamps, dtype=np.int64)
+    order = np.argsort(stamp, kind="stable")
+    data = np.array(rows, dtype=float).reshape(-1, 3)[order]
+    return JointSeries(stamp[order], data[:, 0], data[:, 1], data[:, 2])
 
 
-def scalar_series(bag: BagSource, topic: str, msgtype: str, field_path: str) -> np.ndarray:
-    """(n, 2) array of [stamp_s, value] for a stamped message; ``field_path`` like
+def scalar_series(bag: BagSource, topic: str, msgtype: str, field_path: str) -> ScalarSeries:
+    """One field of a stamped message over time, in stamp order; ``field_path`` like
     'wrench.force.z' or 'point.z'."""
     bag.require_topic(topic, msgtype)
     fields = _fields(bag, topic)
     if fields is not None and field_path in fields.fields:
-        data = np.stack([_stamps(fields), fields.fields[field_path].astype(float)], axis=1)
-        return data[np.argsort(data[:, 0], kind="stable")]
-    parts = field_path.split(".")
-    rows = []
-    for _topic, _log, msg in bag.messages([topic]):
-        value: Any = msg
-        for part in parts:
-            value = getattr(value, part)
-        rows.append((stamp_s(msg.header), float(value)))
-    data = np.array(rows, dtype=float).reshape(-1, 2)
-    return data[np.argsort(data[:, 0], kind="stable")]
+        stamp, value = _stamps(fields), fields.fields[field_path].astype(float)
+    else:
+        parts = field_path.split(".")
+        stamps, values = [], []
+        for _topic, _log, msg in bag.messages([topic]):
+            item: Any = msg
+            for part in parts:
+                item = getattr(item, part)
+            stamps.append(stamp_ns(msg.header))
+            values.append(float(item))
+        stamp, value = np.array(stamps, dtype=np.int64), np.array(values, dtype=float)
+    order = np.argsort(stamp, kind="stable")
+    return ScalarSeries(stamp[order], value[order])

@@ -183,6 +183,6 @@ def _problem(args: argparse.Namespace) -> Any:
         with open_bag(bag_path) as bag:
             s = joint_series(bag, "/joint_states")
         trials.append(
-            Trial(bag_path.name, s.stamp_s - s.stamp_s[0], s.position, s.velocity, s.effort)
+            Trial(bag_path.name, s.seconds(int(s.stamp_ns[0])), s.position, s.velocity, s.effort)
         )
     return TorqueDrivenProblem(model, trials, window_s=args.window)

@@ -13,12 +13,15 @@ with k_s epsilon = 0.02 N m for the feel-cage task), through a Schmitt trigger p
   even when the dwell time confirms it later;
 * settings per joint, changeable at runtime, and a reset.
 
-Time is passed in (seconds, stamps of the samples); nothing here reads a clock.
+Time is passed in as the samples' stamps, integer nanoseconds (a header stamp's sec * 1e9 +
+nanosec): an event carries the very stamp of its sample, never a float rounded back. Nothing
+here reads a clock.
 """
 
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass, field, replace
 from enum import Enum
 
@@ -78,6 +81,17 @@ def estimate_torque(
         - gains.beta_nms_per_rad * ad,
         dtype=np.float64,
     )
+
+
+def _ns(seconds: float) -> int:
+    """A duration setting [s] as integer nanoseconds, to compare with stamp differences."""
+    return round(seconds * 1e9)
+
+
+def _text(stamp_ns: int) -> str:
+    """A stamp as exact seconds text (sec.nanosec)."""
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    return f"{sec}.{nanosec:09d}"
 
 
 class ContactLevel(int, Enum):
@@ -149,8 +163,8 @@ class EventKind(str, Enum):
 class ContactEvent:
     kind: EventKind
     joint: str
-    stamp_s: float  # stamp of the sample that crossed the level
-    confirmed_s: float  # stamp of the sample that confirmed it (after the dwell time)
+    stamp_ns: int  # stamp of the sample that crossed the level
+    confirmed_ns: int  # stamp of the sample that confirmed it (after the dwell time)
     signal: float
     torque_nm: float
     level: ContactLevel  # state after the event
@@ -159,9 +173,8 @@ class ContactEvent:
 @dataclass
 class _JointState:
     level: ContactLevel = ContactLevel.NONE
-    pending_up: tuple[ContactLevel, float] | None = None  # (target level, first crossing stamp)
-    pending_down_since: float | None = None
-    last_stamp_s: float = -math.inf
+    pending_up: tuple[ContactLevel, int] | None = None  # (target level, first crossing stamp)
+    pending_down_since: int | None = None
 
 
 @dataclass
@@ -199,12 +212,12 @@ class SchmittDetector:
     def level(self, joint: str) -> ContactLevel:
         return self._joints.get(joint, _JointState()).level
 
-    def update(self, joint: str, stamp_s: float, signal: float, torque_nm: float
+    def update(self, joint: str, stamp_ns: int, signal: float, torque_nm: float
                ) -> list[ContactEvent]:  # fmt: skip
-        """Feed one sample; return the events it completes (usually none)."""
+        """Feed one sample stamped ``stamp_ns`` [ns]; return the events it completes (usually
+        none)."""
         s = self.settings_for(joint)
         st = self._joints.setdefault(joint, _JointState())
-        st.last_stamp_s = stamp_s
         value = abs(signal - s.bias)
         events: list[ContactEvent] = []
         # rising: the highest level whose onset the signal exceeds, above the current one
@@ -215,10 +228,10 @@ class SchmittDetector:
             target = ContactLevel.CONTACT
         if target > st.level:
             if st.pending_up is None or st.pending_up[0] < target:
-                first = st.pending_up[1] if st.pending_up is not None else stamp_s
+                first = st.pending_up[1] if st.pending_up is not None else stamp_ns
                 st.pending_up = (target, first)
             up_target, first = st.pending_up
-            if stamp_s - first >= s.onset_dwell_s:
+            if stamp_ns - first >= _ns(s.onset_dwell_s):
                 for lvl in range(st.level + 1, up_target + 1):
                     new = ContactLevel(lvl)
                     kind = (
@@ -226,7 +239,7 @@ class SchmittDetector:
                         if new is ContactLevel.COLLISION
                         else EventKind.CONTACT_ONSET
                     )
-                    events.append(ContactEvent(kind, joint, first, stamp_s, value, torque_nm, new))
+                    events.append(ContactEvent(kind, joint, first, stamp_ns, value, torque_nm, new))
                 st.level = up_target
                 st.pending_up = None
             st.pending_down_since = None
@@ -235,8 +248,8 @@ class SchmittDetector:
         # falling: below the release level of the current state
         if st.level is not ContactLevel.NONE and value <= s.release_level(st.level):
             if st.pending_down_since is None:
-                st.pending_down_since = stamp_s
-            if stamp_s - st.pending_down_since >= s.release_dwell_s:
+                st.pending_down_since = stamp_ns
+            if stamp_ns - st.pending_down_since >= _ns(s.release_dwell_s):
                 below = ContactLevel(st.level - 1)
                 # drop straight to NONE when also below the contact release level
                 if below is ContactLevel.CONTACT and value <= s.contact_release:
@@ -248,7 +261,7 @@ class SchmittDetector:
                 )
                 events.append(
                     ContactEvent(
-                        kind, joint, st.pending_down_since, stamp_s, value, torque_nm, below
+                        kind, joint, st.pending_down_since, stamp_ns, value, torque_nm, below
                     )
                 )
                 st.level = below
@@ -315,7 +328,7 @@ class SampleRejectedError(EstimatorError):
 @dataclass(frozen=True)
 class JointEstimate:
     joint: str
-    stamp_s: float
+    stamp_ns: int
     error_rad: float  # theta_d - theta_a
     torque_nm: float  # tau_hat
 
@@ -335,8 +348,8 @@ class EstimatorPipeline:
     default_theta_d_rad: float = 0.0
     rejected: dict[str, int] = field(default_factory=dict)
     samples: int = 0
-    _commands: dict[str, tuple[float, float, float | None]] = field(default_factory=dict)
-    _last_stamp: dict[str, float] = field(default_factory=dict)
+    _commands: dict[str, tuple[float, float, int | None]] = field(default_factory=dict)
+    _last_stamp: dict[str, int] = field(default_factory=dict)
 
     def reject(self, reason: str, detail: str) -> SampleRejectedError:
         """Count a rejection under ``reason``; the error to raise (or drop) with ``detail``."""
@@ -358,8 +371,10 @@ class EstimatorPipeline:
             raise self.reject("unknown_joint", f"{unknown} not in {sorted(self.joints)}")
 
     def command(self, names: list[str], positions: list[float], velocities: list[float],
-                stamp_s: float | None = None) -> None:  # fmt: skip
-        """A /joint_commands message: theta_d (and theta_d') per joint, stamped or not."""
+                stamp_ns: int | None = None) -> None:  # fmt: skip
+        """A /joint_commands message: theta_d (and theta_d') per joint, stamped [ns] or not."""
+        if stamp_ns is not None:
+            stamp_ns = operator.index(stamp_ns)  # an int: a float stamp is a caller's bug
         self._check_arrays(names, {"positions": positions, "velocities": velocities})
         if not positions:
             raise self.reject("no_position", "a command needs positions")
@@ -367,42 +382,46 @@ class EstimatorPipeline:
         if not all(math.isfinite(v) for v in values):
             raise self.reject("not_finite", "NaN or inf in a command")
         for i, name in enumerate(names):
-            self._commands[name] = (positions[i], velocities[i] if velocities else 0.0, stamp_s)
+            self._commands[name] = (positions[i], velocities[i] if velocities else 0.0, stamp_ns)
 
     def sample(
-        self, stamp_s: float, names: list[str], positions: list[float], velocities: list[float]
+        self, stamp_ns: int, names: list[str], positions: list[float], velocities: list[float]
     ) -> tuple[list[JointEstimate], list[ContactEvent]]:
-        """A /joint_states message. Raises SampleRejectedError (counted) for a bad sample."""
+        """A /joint_states message stamped ``stamp_ns`` [ns]. Raises SampleRejectedError
+        (counted) for a bad sample."""
+        stamp_ns = operator.index(stamp_ns)  # an int: a float stamp is a caller's bug
         self._check_arrays(names, {"positions": positions, "velocities": velocities})
         if not positions:
             raise self.reject("no_position", "a joint state needs positions")
-        values = list(positions) + list(velocities) + [stamp_s]
+        values = list(positions) + list(velocities)
         if not all(math.isfinite(v) for v in values):
             raise self.reject("not_finite", "NaN or inf in a joint state")
         for name in names:
             last = self._last_stamp.get(name)
-            if last is not None and stamp_s <= last:
-                raise self.reject("stamp_not_increasing", f"{name}: {stamp_s:.9f} after {last:.9f}")
+            if last is not None and stamp_ns <= last:
+                raise self.reject(
+                    "stamp_not_increasing", f"{name}: {_text(stamp_ns)} after {_text(last)}"
+                )
         estimates: list[JointEstimate] = []
         for i, name in enumerate(names):
             theta_d, theta_d_dot, command_stamp = self._commands.get(
                 name, (self.default_theta_d_rad, 0.0, None)
             )
             if command_stamp is not None and theta_d_dot != 0.0:
-                theta_d += theta_d_dot * (stamp_s - command_stamp)
+                theta_d += theta_d_dot * (stamp_ns - command_stamp) * 1e-9
             velocity = velocities[i] if velocities else 0.0
             error = theta_d - positions[i]
             torque = self.gains.torque(theta_d, positions[i], theta_d_dot, velocity)
             if not (math.isfinite(error) and math.isfinite(torque)):  # finite, but too large
                 raise self.reject("out_of_range", f"{name}: the estimate overflows ({torque})")
-            estimates.append(JointEstimate(name, stamp_s, error, torque))
+            estimates.append(JointEstimate(name, stamp_ns, error, torque))
         # only a sample accepted whole changes the state
         self.samples += 1
         events: list[ContactEvent] = []
         for estimate in estimates:
-            self._last_stamp[estimate.joint] = stamp_s
+            self._last_stamp[estimate.joint] = stamp_ns
             events += self.detector.update(
-                estimate.joint, stamp_s, estimate.error_rad, estimate.torque_nm
+                estimate.joint, stamp_ns, estimate.error_rad, estimate.torque_nm
             )
         return estimates, events
 

@@ -69,7 +69,7 @@ from transparency_ros.core.drop_rig import DropRig, RigParams
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.feel_cage_config import load_setup
 from transparency_ros.ros import in_process
-from transparency_ros.ros.conversions import s_to_stamp, stamp_to_s
+from transparency_ros.ros.conversions import s_to_ns, stamp_to_s
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, parse_node_cli
 from transparency_ros.ros.sim_ball import SimBallInterface
 from transparency_ros.ros.sim_rig import SimRigInterface
@@ -556,10 +556,10 @@ class ActuatorDriverNode(LifecycleNode):
         if pub is None:
             return
         # when the reply was on the bus (see canbus.loop), not when read or published
-        stamp = s_to_stamp(self._ros_seconds_at(sampled_s))
+        sec, nanosec = divmod(s_to_ns(self._ros_seconds_at(sampled_s)), 1_000_000_000)
         data = encode_joint_state(
-            stamp.sec,
-            stamp.nanosec,
+            sec,
+            nanosec,
             "",
             [self.values["joint_name"]],
             position=[fb.position_rad],

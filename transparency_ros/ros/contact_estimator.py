@@ -63,7 +63,7 @@ from transparency_ros.core.estimator import (
 )
 from transparency_ros.core.histogram import DurationHistogram
 from transparency_ros.ros import in_process
-from transparency_ros.ros.conversions import s_to_stamp, stamp_to_s
+from transparency_ros.ros.conversions import stamp_to_ns
 from transparency_ros.ros.hot_path import Delivery, HotPath
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, run_node
 
@@ -262,13 +262,13 @@ class ContactEstimatorNode(Node):
 
     def _on_command(self, msg: JointState) -> None:
         try:
-            stamp = stamp_to_s(msg.header.stamp)
+            stamp_ns = stamp_to_ns(msg.header.stamp)
             with self.lock:
                 self.pipeline.command(
                     list(msg.name),
                     list(msg.position),
                     list(msg.velocity),
-                    stamp if stamp > 0 else None,
+                    stamp_ns if stamp_ns > 0 else None,
                 )
         except SampleRejectedError as err:
             self._warn(f"rejected /joint_commands: {err}")
@@ -300,7 +300,7 @@ class ContactEstimatorNode(Node):
             self._period_arrivals += 1
             try:
                 estimates, events = self.pipeline.sample(
-                    sample.stamp_s,
+                    stamp_ns,
                     sample.name,
                     list(sample.position),
                     list(sample.velocity),
@@ -329,10 +329,10 @@ class ContactEstimatorNode(Node):
         if pub is not None:
             arm = self.values["arm_length_m"]
             force = event.torque_nm / arm if arm > 0 else 0.0
-            stamp = s_to_stamp(event.stamp_s)
+            sec, nanosec = divmod(event.stamp_ns, 1_000_000_000)  # exact: the sample's own stamp
             data = encode_wrench_stamped(
-                stamp.sec,
-                stamp.nanosec,
+                sec,
+                nanosec,
                 event.joint,
                 (0.0, 0.0, force),
                 (0.0, 0.0, event.torque_nm),

@@ -1,4 +1,10 @@
-"""Message <-> core value conversions shared by the nodes."""
+"""Message <-> core value conversions shared by the nodes.
+
+Stamps cross into the core as integer nanoseconds (``stamp_to_ns``) and come back out with
+``ns_to_stamp``: exact both ways, for any stamp a ``builtin_interfaces/Time`` holds. Float
+seconds (``stamp_to_s``) are for durations and display only: at today's epoch (1.8e9 s) a
+float64 resolves about 240 ns, so a stamp rounded through it no longer matches its sample.
+"""
 
 from __future__ import annotations
 
@@ -6,16 +12,27 @@ import math
 
 from builtin_interfaces.msg import Time
 
+NS_PER_S = 1_000_000_000
+
+
+def stamp_to_ns(stamp: Time) -> int:
+    """A header stamp as integer nanoseconds (exact)."""
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def ns_to_stamp(stamp_ns: int) -> Time:
+    """Integer nanoseconds as a header stamp (exact; negative stamps borrow from sec)."""
+    sec, nanosec = divmod(int(stamp_ns), NS_PER_S)
+    return Time(sec=sec, nanosec=nanosec)
+
 
 def stamp_to_s(stamp: Time) -> float:
-    """A header stamp as seconds (float)."""
+    """A header stamp as seconds (float: for durations and display, not for matching stamps)."""
     return float(stamp.sec) + float(stamp.nanosec) * 1e-9
 
 
-def s_to_stamp(seconds: float) -> Time:
-    """Seconds as a header stamp, nanoseconds rounded (never 1e9)."""
+def s_to_ns(seconds: float) -> int:
+    """Where a stamp is made from a clock that reads float seconds (python-can's bus time):
+    whole seconds kept exact, the fraction rounded to the nanosecond."""
     sec = math.floor(seconds)
-    nanosec = round((seconds - sec) * 1e9)
-    if nanosec >= 1_000_000_000:
-        sec, nanosec = sec + 1, nanosec - 1_000_000_000
-    return Time(sec=int(sec), nanosec=int(nanosec))
+    return int(sec) * NS_PER_S + round((seconds - sec) * 1e9)

@@ -35,7 +35,6 @@ from transparency_ros.core.config import get_actuator, load_drop_test
 from transparency_ros.core.drop_rig import GRAVITY
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.interrupts import deferred_interrupts
-from transparency_ros.ros.conversions import s_to_stamp
 from transparency_ros.ros.harness import (
     Listener,
     driver_left_motor_enabled,
@@ -197,7 +196,7 @@ class _Station:
 
     def command(self, theta_d: float) -> None:
         msg = JointState(name=["joint"], position=[theta_d])
-        msg.header.stamp = s_to_stamp(self.node.get_clock().now().nanoseconds * 1e-9)
+        msg.header.stamp = self.node.get_clock().now().to_msg()
         self.commands.publish(msg)
 
     def record_drop(

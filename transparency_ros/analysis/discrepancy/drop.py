@@ -126,9 +126,10 @@ def load_drop_trial(path: str | Path) -> DropTrial:
             finite = commands.position[np.isfinite(commands.position)]
             theta_d = float(finite[-1]) if finite.size else 0.0
     keep = np.isfinite(states.position)
-    t0 = float(min(states.stamp_s[0], height[0, 0]))
-    t_q, q = states.stamp_s[keep] - t0, states.position[keep]
-    t_h, h, f = height[:, 0] - t0, height[:, 1], np.interp(height[:, 0], force[:, 0], force[:, 1])
+    t0_ns = int(min(states.stamp_ns[0], height.stamp_ns[0]))  # exact; seconds from there on
+    t_q, q = states.seconds(t0_ns)[keep], states.position[keep]
+    t_h, h = height.seconds(t0_ns), height.value
+    f = np.interp(t_h, force.seconds(t0_ns), force.value)
     threshold = load_drop_test().contact_force_threshold_n
     above = np.nonzero(f > threshold)[0]
     if above.size == 0:
