@@ -26,7 +26,11 @@ from transparency_ros.commands import (
     salvage,
 )
 from transparency_ros.core.errors import TransparencyError
-from transparency_ros.core.interrupts import interruption_name, terminate_like_interrupt
+from transparency_ros.core.interrupts import (
+    interrupt_on_sigint,
+    interruption_name,
+    terminate_like_interrupt,
+)
 
 SUBCOMMANDS = (model, feelcage, rig, evaluate, salvage, discrepancy, compare, demo)
 
@@ -51,6 +55,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     previous = signal.getsignal(signal.SIGTERM)
     terminate_like_interrupt()  # SIGTERM unwinds like Ctrl-C: bags closed, nodes stopped
+    previous_int = interrupt_on_sigint()  # and SIGINT too when started with it ignored
     try:
         return int(args.func(args))
     except TransparencyError as err:
@@ -64,6 +69,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 128 + signal.Signals[name].value
     finally:
         signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -38,7 +38,7 @@ def _publish(node: Node, count: int) -> None:
 
 @pytest.mark.parametrize("how", ["SIGINT", "SIGTERM"])
 def test_a_signal_keeps_every_message_received(
-    ros_context: Context, tmp_path: Path, how: str
+    sigint_raises: None, ros_context: Context, tmp_path: Path, how: str
 ) -> None:
     node = Node("recorder_test", context=ros_context)
     recorder = Recorder(node, {"/joint_states": JointState})

@@ -115,7 +115,7 @@ def _signal_inside(caught: list[str]) -> None:
         caught.append("still running")  # not interrupted inside the block
 
 
-def test_a_signal_during_the_close_waits_for_it() -> None:
+def test_a_signal_during_the_close_waits_for_it(sigint_raises: None) -> None:
     caught: list[str] = []
     with pytest.raises(KeyboardInterrupt):
         _signal_inside(caught)

@@ -6,6 +6,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -134,3 +135,40 @@ def test_demo_produces_what_it_lists(tmp_path: Path, capsys: pytest.CaptureFixtu
         assert Path(path).stat().st_size > 0
     summary = json.loads((tmp_path / "actuators_summary.json").read_text())
     assert [s["actuator"] for s in summary] == ["U10DD", "EC60", "T2822", "U10GB"]
+
+
+STARTED_WITH_SIGINT_IGNORED = """
+import os, signal, sys, time
+signal.signal(signal.SIGINT, signal.SIG_IGN)  # as a script's background job starts
+from transparency_ros import cli
+
+class Waits:  # a subcommand that is interrupted while it works
+    @staticmethod
+    def register(subparsers):
+        subparsers.add_parser("wait").set_defaults(func=Waits.run)
+
+    @staticmethod
+    def run(args):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(5.0)
+        print("SIGINT was ignored")
+        return 0
+
+cli.SUBCOMMANDS = (Waits,)
+code = cli.main(["wait"])
+assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN, "disposition not restored"
+sys.exit(code)
+"""
+
+
+def test_sigint_stops_a_command_started_with_sigint_ignored() -> None:
+    """A script's background job inherits SIGINT ignored; rclpy shuts its contexts down on
+    SIGINT all the same, so a command unwinds as for Ctrl-C instead of running on with dead
+    contexts, and puts the disposition back when it returns."""
+    done = subprocess.run(
+        [sys.executable, "-c", STARTED_WITH_SIGINT_IGNORED],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert done.returncode == 128 + signal.SIGINT, (done.stdout, done.stderr)
+    assert "transparency wait: stopped by SIGINT" in done.stderr
+    assert "SIGINT was ignored" not in done.stdout

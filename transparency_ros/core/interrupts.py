@@ -6,6 +6,11 @@ closed and node processes stopped. SIGTERM (``kill``, systemd, a CI timeout) end
 process on the spot by default; :func:`terminate_like_interrupt` makes it raise
 :class:`Terminated` instead, a ``KeyboardInterrupt`` subclass, so the same clean-up runs.
 
+:func:`interrupt_on_sigint` makes SIGINT raise ``KeyboardInterrupt`` even where the process was
+started with SIGINT ignored (the background of a script: shells without job control start
+such processes so). rclpy shuts its contexts down on SIGINT whatever Python's disposition, so a
+command that ignored it would go on with dead contexts; it unwinds as for Ctrl-C instead.
+
 :func:`deferred_interrupts` holds SIGINT and SIGTERM back while a file is being finished (a
 second Ctrl-C during the close must not leave half a bag); they are raised when the block ends.
 """
@@ -38,6 +43,12 @@ def _raise_terminated(signum: int, frame: FrameType | None) -> None:
 def terminate_like_interrupt() -> None:
     """Make SIGTERM raise :class:`Terminated` in the main thread (call from the main thread)."""
     signal.signal(signal.SIGTERM, _raise_terminated)
+
+
+def interrupt_on_sigint() -> Any:
+    """SIGINT raises ``KeyboardInterrupt`` (Python's default handler), also when the process
+    started with it ignored; returns the previous handler (call from the main thread)."""
+    return signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _raise_for(signum: int) -> None:

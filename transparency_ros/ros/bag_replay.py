@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -89,11 +90,27 @@ class Player:
     def wait_for_subscribers(self, count: int, timeout_s: float) -> bool:
         """True once every topic's publisher has matched ``count`` subscriptions."""
         deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and self.running():
             if all(p.get_subscription_count() >= count for p in self.publishers.values()):
                 return True
             time.sleep(0.05)
         return False
+
+    def running(self) -> bool:
+        """False once the context is shut down: by rclpy's SIGINT/SIGTERM handler, which runs
+        even where Python's own SIGINT handling is off (a process started in the background of
+        a script inherits SIGINT ignored, and Python then never raises KeyboardInterrupt)."""
+        return self.node.context.ok()
+
+    def flush(self, timeout_s: float = 2.0) -> bool:
+        """Wait until reliable subscribers acknowledged everything published (the last messages
+        are otherwise lost when the process ends right after them); False on timeout."""
+        deadline = time.monotonic() + timeout_s
+        for pub in [*self.publishers.values(), *([self.clock] if self.clock else [])]:
+            left = max(deadline - time.monotonic(), 0.0)
+            if not pub.wait_for_all_acked(Duration(nanoseconds=round(left * 1e9))):
+                return False
+        return True
 
     def _publish_clock(self, bag_ns: int) -> None:
         if self.clock is not None:
@@ -108,26 +125,35 @@ class Player:
         last_clock = -1
         with open_bag(self.args.bag) as bag:
             for conn, log_ns, data in bag.raw(self.topics):
+                if not self.running():
+                    break
                 if start_bag is None:
                     start_bag = log_ns + offset_ns
                     start_wall = time.monotonic()
                 if log_ns < start_bag:
                     continue
                 target = start_wall + (log_ns - start_bag) * 1e-9 / rate
-                while True:
+                while self.running():
                     remaining = target - time.monotonic()
                     if remaining <= 0:
                         break
-                    if self.clock is not None and remaining > 0.01:
+                    if remaining > 0.01:  # in steps, to see a shutdown and feed /clock
                         time.sleep(0.01)
                         now_ns = start_bag + round((time.monotonic() - start_wall) * rate * 1e9)
                         self._publish_clock(now_ns)
                     else:
                         time.sleep(remaining)
+                if not self.running():
+                    break
                 if log_ns != last_clock:
                     self._publish_clock(log_ns)
                     last_clock = log_ns
-                self.publishers[conn.topic].publish(bytes(data))
+                try:
+                    self.publishers[conn.topic].publish(bytes(data))
+                except Exception:  # a shutdown between the check and the call
+                    if self.running():
+                        raise
+                    break
                 self.published += 1
         return self.published
 
@@ -148,10 +174,13 @@ def main(args: list[str] | None = None) -> int:
             message = f"{NODE_NAME}: error: fewer than {wanted} subscribers after 30 s"
             print(message, file=sys.stderr)  # noqa: T201
             return 2
-        while True:
+        while player.running():
             player.play_once()
             if not options.loop:
                 break
+        if player.running() and not player.flush():
+            warning = f"{NODE_NAME}: warning: not every message was acknowledged within 2 s"
+            print(warning, file=sys.stderr)  # noqa: T201
         print(f"{NODE_NAME}: published {player.published} messages", file=sys.stderr)  # noqa: T201
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
