@@ -1,13 +1,11 @@
-"""Lifecycle node ``actuator_driver``: a CAN actuator as sensor_msgs/JointState.
+"""The lifecycle shell of ``actuator_driver``: transitions, the data path between ROS and the
+hardware loop, services, and ``main``.
 
 configure: open the bus (and start the simulated actuator when ``simulate``); activate: enter
 motor mode and start the hardware loop; deactivate: zero torque, motor off; cleanup/shutdown:
 close the bus. With ``autostart`` (default) the node configures and activates itself. Every exit
 path (Ctrl-C, SIGTERM, an exception, lifecycle shutdown, interpreter exit) ends in
 :meth:`ActuatorDriverNode.make_safe`: zero torque and motor mode off.
-
-The loop itself, the watchdogs and limits are ROS-free (``canbus.loop``, ``core.driver``);
-this file converts messages and parameters.
 """
 
 from __future__ import annotations
@@ -21,7 +19,7 @@ from dataclasses import replace
 from typing import Any
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -32,267 +30,48 @@ from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool, Trigger
 
-from transparency_ros.canbus import mit
 from transparency_ros.canbus.client import ActuatorClient, BusSettings
 from transparency_ros.canbus.clock import ClockOffset
-from transparency_ros.canbus.errors import BusError, CanProtocolError
+from transparency_ros.canbus.errors import CanProtocolError
 from transparency_ros.canbus.loop import ControlLoop
 from transparency_ros.canbus.protocol import (
-    PROTOCOLS,
     ActuatorProtocol,
     Feedback,
     MitProtocol,
     MoteusProtocol,
-    ODriveProtocol,
 )
-from transparency_ros.canbus.sim_device import (
-    MitDevice,
-    MoteusDevice,
-    ODriveDevice,
-    Personality,
-    SimulatedActuator,
-)
-from transparency_ros.core.actuator_physics import ActuatorPhysics, Environment, PhysicsParams
-from transparency_ros.core.ball_on_rail import BallOnRail
+from transparency_ros.canbus.sim_device import SimulatedActuator
 from transparency_ros.core.cdr import encode_joint_state
-from transparency_ros.core.config import get_actuator, load_drop_test
 from transparency_ros.core.driver import (
     CommandRejectedError,
     DriverCore,
-    DriverMode,
     DriverSettings,
     SettingsError,
-    TimeoutAction,
     parse_joint_command,
 )
-from transparency_ros.core.drop_rig import DropRig, RigParams
 from transparency_ros.core.errors import TransparencyError
-from transparency_ros.core.feel_cage_config import load_setup
 from transparency_ros.ros import in_process
+from transparency_ros.ros.actuator_driver.diagnostics import driver_status, late_message
+from transparency_ros.ros.actuator_driver.hardware import make_protocol, start_simulation
+from transparency_ros.ros.actuator_driver.parameters import (
+    DESCRIPTION,
+    NODE_NAME,
+    PARAMETERS,
+    RUNTIME,
+    settings_value,
+)
 from transparency_ros.ros.conversions import s_to_ns, stamp_to_s
-from transparency_ros.ros.params import ParamSpec, choice_error, declare, parse_node_cli
+from transparency_ros.ros.params import choice_error, declare, parse_node_cli
 from transparency_ros.ros.sim_ball import SimBallInterface
 from transparency_ros.ros.sim_rig import SimRigInterface
 
-NODE_NAME = "actuator_driver"
-
-P = ParamSpec
-PARAMETERS: tuple[ParamSpec, ...] = (
-    # bus and device: fixed for the node's lifetime
-    P(
-        "interface",
-        "virtual",
-        "python-can interface: socketcan, pcan, kvaser, slcan, gs_usb, virtual, ...",
-        read_only=True,
-    ),
-    P(
-        "channel",
-        "transparency_sim",
-        "python-can channel (can0, PCAN_USBBUS1, /dev/ttyACM0, ...)",
-        read_only=True,
-    ),
-    P(
-        "bitrate",
-        1_000_000,
-        "nominal bitrate [bit/s] (ignored by virtual and socketcan)",
-        read_only=True,
-        low=10_000,
-        high=1_000_000,
-    ),
-    P("fd", False, "open the bus in CAN-FD mode (moteus needs it)", read_only=True),
-    P("protocol", "mit", "wire protocol", read_only=True, choices=PROTOCOLS),
-    P(
-        "motor_id",
-        1,
-        "MIT motor id / ODrive node id / moteus id",
-        read_only=True,
-        low=0,
-        high=0x7FF,
-    ),
-    P(
-        "gear_ratio",
-        1.0,
-        "device native units per output unit (1: device reports at the output)",
-        read_only=True,
-        low=1e-3,
-        high=1e3,
-    ),
-    P("joint_name", "joint", "name in JointState messages", read_only=True),
-    P("simulate", True, "attach the simulated actuator to the (virtual) bus", read_only=True),
-    P(
-        "sim_actuator",
-        "U10DD",
-        "Table 1 actuator the simulation integrates",
-        read_only=True,
-        choices=("U10DD", "EC60", "T2822", "U10GB"),
-    ),
-    P(
-        "sim_encoder_counts_per_rev",
-        16384,
-        "simulated encoder counts per motor revolution",
-        read_only=True,
-        low=16,
-        high=1 << 24,
-    ),
-    P(
-        "sim_environment",
-        "free",
-        "what the simulated output drives: free, the feel-cage ball_on_rail (arm, rail and "
-        "ball of config/feel_cage.yaml) or the drop-test drop_rig (arm and falling shuttle)",
-        read_only=True,
-        choices=("free", "ball_on_rail", "drop_rig"),
-    ),
-    P(
-        "sim_shuttle_mass_kg",
-        0.0,
-        "drop_rig: shuttle mass [kg] (0: the paper's for sim_actuator, config/drop_test.yaml)",
-        read_only=True,
-        low=0.0,
-        high=20.0,
-    ),
-    P(
-        "sim_drop_height_m",
-        0.1,
-        "drop_rig: height of the shuttle's face above the arm tip for the next ~/sim/drop [m]",
-        low=0.001,
-        high=2.0,
-    ),
-    P(
-        "sim_rig_seed",
-        0,
-        "drop_rig: seed of the DAQ sensor noise",
-        read_only=True,
-        low=0,
-        high=2**31,
-    ),
-    P(
-        "sim_ball",
-        "rubber",
-        "ball on the rail (ball_on_rail)",
-        read_only=True,
-        choices=("rubber", "lacrosse", "bocce"),
-    ),
-    P(
-        "sim_place_ball",
-        True,
-        "ball_on_rail: ball on the rail from the start (false: place it "
-        "later, e.g. after a settling sweep)",
-        read_only=True,
-    ),
-    P(
-        "sim_friction_ripple",
-        0.0,
-        "simulated position-dependent friction (fraction, once per output revolution)",
-        read_only=True,
-        low=0.0,
-        high=0.5,
-    ),
-    P(
-        "publish_rate_hz",
-        1000.0,
-        "loop and /joint_states rate [Hz]",
-        read_only=True,
-        low=1.0,
-        high=10_000.0,
-    ),
-    P(
-        "reply_timeout_s",
-        0.0005,
-        "wait for a reply per cycle [s] (capped at 0.9 period)",
-        read_only=True,
-        low=1e-5,
-        high=1.0,
-    ),
-    P("autostart", True, "configure and activate on start", read_only=True),
-    P(
-        "gil_switch_interval_s",
-        1e-4,
-        "Python's thread switch interval for this process (the "
-        "hardware loop waits up to this long for the interpreter; Python's default 5 ms stalls it "
-        "behind busy executor threads); 0 leaves it unchanged",
-        read_only=True,
-        low=0.0,
-        high=0.01,
-    ),
-    P("mit.p_min_rad", -12.5, "MIT position range min (firmware specific)", read_only=True),
-    P("mit.p_max_rad", 12.5, "MIT position range max", read_only=True),
-    P("mit.v_min_rad_s", -22.5, "MIT velocity range min", read_only=True),
-    P("mit.v_max_rad_s", 22.5, "MIT velocity range max", read_only=True),
-    P("mit.kp_min", 0.0, "MIT kp range min", read_only=True),
-    P("mit.kp_max", 500.0, "MIT kp range max [N m/rad]", read_only=True),
-    P("mit.kd_min", 0.0, "MIT kd range min", read_only=True),
-    P("mit.kd_max", 5.0, "MIT kd range max [N m s/rad]", read_only=True),
-    P("mit.t_min_nm", -12.0, "MIT torque range min", read_only=True),
-    P("mit.t_max_nm", 12.0, "MIT torque range max", read_only=True),
-    P(
-        "moteus.kp_nm_per_rev",
-        200.0,
-        "servo.pid_position.kp configured in the moteus",
-        read_only=True,
-        low=1e-6,
-        high=1e6,
-    ),
-    P(
-        "moteus.kd_nms_per_rev",
-        5.0,
-        "servo.pid_position.kd configured in the moteus",
-        read_only=True,
-        low=1e-6,
-        high=1e6,
-    ),
-    P(
-        "moteus.watchdog_timeout_s",
-        0.1,
-        "moteus position-mode watchdog",
-        read_only=True,
-        low=1e-3,
-        high=10.0,
-    ),
-    # runtime: validated, applied atomically
-    P("k_s", 2.0, "virtual spring k_s [N m/rad]", low=0.0, high=1000.0),
-    P("k_d", 0.0, "damping k_d [N m s/rad]", low=0.0, high=100.0),
-    P(
-        "command_timeout_s",
-        0.5,
-        "no /joint_commands for this long -> timeout_action",
-        low=1e-3,
-        high=60.0,
-    ),
-    P(
-        "timeout_action",
-        "hold",
-        "after a command timeout: hold position or only damp",
-        choices=("hold", "damp"),
-    ),
-    P("timeout_damping", 0.05, "k_d used by timeout_action=damp [N m s/rad]", low=0.0, high=100.0),
-    P("max_missed_replies", 10, "replies missed in a row before FAULT", low=1, high=10_000),
-    P("position_min_rad", -12.5, "command position clamp min [rad]"),
-    P("position_max_rad", 12.5, "command position clamp max [rad]"),
-    P("velocity_limit_rad_s", 20.0, "command velocity clamp [rad/s]", low=1e-3, high=1e4),
-    P("torque_limit_nm", 5.0, "feed-forward torque clamp [N m]", low=1e-3, high=1e4),
-    P("diagnostics_period_s", 1.0, "/diagnostics period [s]", read_only=True, low=0.01, high=60.0),
-)
-
-# parameter name -> DriverSettings field
-RUNTIME = {
-    "k_s": "k_s_nm_per_rad",
-    "k_d": "k_d_nms_per_rad",
-    "command_timeout_s": "command_timeout_s",
-    "timeout_action": "timeout_action",
-    "timeout_damping": "timeout_damping_nms_per_rad",
-    "max_missed_replies": "max_missed_replies",
-    "position_min_rad": "position_min_rad",
-    "position_max_rad": "position_max_rad",
-    "velocity_limit_rad_s": "velocity_limit_rad_s",
-    "torque_limit_nm": "torque_limit_nm",
-}
-
-
-def _settings_value(name: str, value: Any) -> Any:
-    return TimeoutAction(value) if name == "timeout_action" else value
-
 
 class ActuatorDriverNode(LifecycleNode):
+    """One CAN actuator as a lifecycle node: parameters (``parameters``), what it talks to
+    (``hardware``), the ROS-free loop (``canbus.loop.ControlLoop``) fed with targets from
+    /joint_commands and publishing /joint_states from its own thread, services, diagnostics
+    (``diagnostics``). Every exit path ends in :meth:`make_safe`."""
+
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.values = declare(self, PARAMETERS)
@@ -302,7 +81,7 @@ class ActuatorDriverNode(LifecycleNode):
                 f"process thread switch interval set to {sys.getswitchinterval() * 1e6:.0f} us"
             )
         self.core = DriverCore(DriverSettings(**{
-            field: _settings_value(name, self.values[name]) for name, field in RUNTIME.items()
+            field: settings_value(name, self.values[name]) for name, field in RUNTIME.items()
         }))  # fmt: skip
         self.protocol: ActuatorProtocol | None = None
         self.client: ActuatorClient | None = None
@@ -351,7 +130,7 @@ class ActuatorDriverNode(LifecycleNode):
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
             if param.name in RUNTIME:
-                changes[RUNTIME[param.name]] = _settings_value(param.name, param.value)
+                changes[RUNTIME[param.name]] = settings_value(param.name, param.value)
         try:
             trial = replace(self.core.settings, **changes).validated()
         except (SettingsError, ValueError) as err:
@@ -379,7 +158,7 @@ class ActuatorDriverNode(LifecycleNode):
         for p in params:
             self.values[p.name] = p.value
         changes = {
-            RUNTIME[p.name]: _settings_value(p.name, p.value) for p in params if p.name in RUNTIME
+            RUNTIME[p.name]: settings_value(p.name, p.value) for p in params if p.name in RUNTIME
         }
         if changes:
             lock = self.loop.lock if self.loop is not None else threading.RLock()
@@ -389,74 +168,15 @@ class ActuatorDriverNode(LifecycleNode):
 
     # ----------------------------------------------------------------- lifecycle
 
-    def _make_protocol(self) -> tuple[ActuatorProtocol, Personality]:
-        v = self.values
-        g = v["gear_ratio"]
-        if v["protocol"] == "mit":
-            limits = mit.MitLimits(*(v[f"mit.{k}"] for k in (
-                "p_min_rad", "p_max_rad", "v_min_rad_s", "v_max_rad_s", "kp_min", "kp_max",
-                "kd_min", "kd_max", "t_min_nm", "t_max_nm")))  # fmt: skip
-            return (
-                MitProtocol(v["motor_id"], limits, gear_ratio=g),
-                MitDevice(v["motor_id"], limits, gear_ratio=g),
-            )
-        if v["protocol"] == "odrive":
-            return ODriveProtocol(v["motor_id"], gear_ratio=g), ODriveDevice(
-                v["motor_id"], gear_ratio=g
-            )
-        kp, kd = v["moteus.kp_nm_per_rev"], v["moteus.kd_nms_per_rev"]
-        return (
-            MoteusProtocol(
-                v["motor_id"],
-                kp_nm_per_rev=kp,
-                kd_nms_per_rev=kd,
-                watchdog_timeout_s=v["moteus.watchdog_timeout_s"],
-                gear_ratio=g,
-            ),
-            MoteusDevice(v["motor_id"], kp_nm_per_rev=kp, kd_nms_per_rev=kd, gear_ratio=g),
-        )
-
-    def _environment(self) -> Environment | None:
-        v = self.values
-        if v["sim_environment"] == "drop_rig":
-            drop = load_drop_test()
-            mass = v["sim_shuttle_mass_kg"] or drop.shuttle_mass_for(v["sim_actuator"])
-            return DropRig(
-                RigParams(
-                    shuttle_mass_kg=mass,
-                    arm_length_m=drop.arm_length_m,
-                    arm_inertia_kgm2=drop.arm_inertia_kgm2,
-                    seed=v["sim_rig_seed"],
-                )
-            )
-        if v["sim_environment"] != "ball_on_rail":
-            return None
-        setup = load_setup()
-        return BallOnRail(setup.balls[v["sim_ball"]], setup.geometry, placed=v["sim_place_ball"])
-
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         v = self.values
         try:
-            protocol, personality = self._make_protocol()
+            protocol, personality = make_protocol(v)
             settings = BusSettings(
                 v["interface"], v["channel"], v["bitrate"], v["fd"] or protocol.is_fd
             )
             if v["simulate"]:
-                if v["interface"] != "virtual":
-                    raise BusError(
-                        "simulate:=true needs interface:=virtual (a real bus has a "
-                        "real motor); set simulate:=false for hardware"
-                    )
-                actuator = get_actuator(v["sim_actuator"])
-                physics = ActuatorPhysics(
-                    PhysicsParams.from_actuator(
-                        actuator,
-                        encoder_counts_per_rev=v["sim_encoder_counts_per_rev"],
-                        friction_ripple=v["sim_friction_ripple"],
-                    ),
-                    self._environment(),
-                )
-                self.sim = SimulatedActuator(physics, personality, settings).start()
+                self.sim = start_simulation(v, personality, settings)
             self.protocol = protocol
             self.client = ActuatorClient(protocol, settings.open())
         except (TransparencyError, ValueError) as err:
@@ -638,67 +358,16 @@ class ActuatorDriverNode(LifecycleNode):
     # ----------------------------------------------------------------- diagnostics
 
     def _late_in_period(self) -> str | None:
-        """A warning when most replies of this diagnostics period came after the loop's wait.
-
-        Late replies keep the reply watchdog content (the motor is alive), so a device that is
-        persistently slower than ``reply_timeout_s`` runs on without a fault; this says so."""
+        """Late replies of this diagnostics period (diagnostics.late_message)."""
         if self.client is None:
             return None
         c = self.client.counters
         late, replies = c.late - self._late_seen[0], c.rx - self._late_seen[1]
         self._late_seen = (c.late, c.rx)
-        return _late_message(late, replies, self.values["reply_timeout_s"])
+        return late_message(late, replies, self.values["reply_timeout_s"])
 
     def publish_diagnostics(self) -> None:
-        status = DiagnosticStatus(
-            name=f"{NODE_NAME}: {self.values['joint_name']}",
-            hardware_id=f"{self.values['protocol']}:{self.values['motor_id']}",
-        )
-        s = self.core.status
-        if s.mode is DriverMode.FAULT:
-            status.level, status.message = DiagnosticStatus.ERROR, f"FAULT: {s.fault_reason}"
-        elif self.client is None:
-            status.level, status.message = DiagnosticStatus.WARN, "not configured"
-        elif s.command_timed_out:
-            status.level = DiagnosticStatus.WARN
-            status.message = f"no command for {self.core.settings.command_timeout_s} s: "
-            status.message += self.core.settings.timeout_action.value
-        elif (late := self._late_in_period()) is not None:
-            status.level, status.message = DiagnosticStatus.WARN, late
-        else:
-            status.level, status.message = DiagnosticStatus.OK, s.mode.value
-        values: dict[str, Any] = {
-            "mode": s.mode.value, "interface": self.values["interface"],
-            "channel": self.values["channel"], "commands_accepted": s.commands_accepted,
-            "commands_rejected": s.commands_rejected, "commands_clamped": s.commands_clamped,
-            "missed_replies_total": s.missed_replies_total,
-            "missed_replies_in_row": s.missed_replies_in_row, "last_rejection": s.last_rejection,
-        }  # fmt: skip
-        if self.client is not None:
-            c = self.client.counters
-            values.update(
-                tx=c.tx,
-                rx=c.rx,
-                tx_errors=c.tx_errors,
-                rx_errors=c.rx_errors,
-                timeouts=s.missed_replies_total,
-                late_replies=c.late,
-                duplicate_replies=c.duplicates,
-                malformed=c.malformed,
-                other_frames=c.other,
-                last_bus_error=c.last_error,
-            )
-        if self.loop is not None:
-            st = self.loop.stats()
-            values.update(
-                loop_rate_hz=f"{st.rate_hz:.1f}",
-                loop_cycles=st.cycles,
-                overruns=st.overruns,
-                jitter_p50_us=f"{st.jitter_p50_s * 1e6:.0f}",
-                jitter_p99_us=f"{st.jitter_p99_s * 1e6:.0f}",
-                jitter_max_us=f"{st.jitter_max_s * 1e6:.0f}",
-            )
-        status.values = [KeyValue(key=k, value=str(val)) for k, val in values.items()]
+        status = driver_status(self.values, self.core, self.client, self.loop, self._late_in_period)
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(array)
@@ -709,26 +378,6 @@ def _exit_logger() -> Any:
     once a signal has shut the context down (rcl then prints "Failed to publish log message to
     rosout")."""
     return rclpy.logging.get_logger(f"{NODE_NAME}.exit")
-
-
-LATE_WARN_FRACTION = 0.5  # more of a period's replies late than this: WARN
-
-
-def _late_message(late: int, replies: int, timeout_s: float) -> str | None:
-    if replies <= 0 or late <= LATE_WARN_FRACTION * replies:
-        return None
-    return (
-        f"{late} of {replies} replies late this period: the device or bus answers slower than "
-        f"reply_timeout_s {timeout_s * 1e3:g} ms (samples are published at their bus time)"
-    )
-
-
-DESCRIPTION = (
-    "Drive one CAN actuator (MIT mode, ODrive CANSimple or moteus) and publish its state on "
-    "/joint_states; follow /joint_commands with an impedance law. Lifecycle node; with "
-    "autostart it configures and activates itself. Services: ~/set_zero (std_srvs/Trigger), "
-    "~/enable (std_srvs/SetBool). Default: a simulated U10DD on a virtual bus."
-)
 
 
 def main(args: list[str] | None = None) -> int:
@@ -757,7 +406,3 @@ def main(args: list[str] | None = None) -> int:
             node.destroy_node()
         try_shutdown()
     return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
