@@ -22,13 +22,13 @@ from typing import Any
 import numpy as np
 import pysindy as ps
 
-from transparency_ros.analysis.discrepancy.discover import split_trials
 from transparency_ros.analysis.discrepancy.model import (
     NominalModel,
     Trial,
     make_windows,
     smooth_derivatives,
 )
+from transparency_ros.analysis.discrepancy.problem import split_trials
 
 FREQUENCIES = 24
 THRESHOLDS = (0.1, 0.3, 1.0, 3.0)

@@ -145,10 +145,10 @@ def run_discrepancy(args: argparse.Namespace) -> int:
 
 def _problem(args: argparse.Namespace) -> Any:
     """The problem of the bags' kind: all bags of one run are of one kind."""
-    from transparency_ros.analysis.discrepancy.discover import (  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.model import Trial, load_nominal  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.torque_driven import (  # noqa: PLC0415
         TorqueDrivenProblem,
     )
-    from transparency_ros.analysis.discrepancy.model import Trial, load_nominal  # noqa: PLC0415
     from transparency_ros.bag.reader import find_bags, joint_series, open_bag  # noqa: PLC0415
 
     bags = find_bags(args.bags)

@@ -37,14 +37,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from transparency_ros.analysis.discrepancy.discover import (
+from transparency_ros.analysis.discrepancy.drop_kernel import impact
+from transparency_ros.analysis.discrepancy.effects import drifted, pinned
+from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray, read_spec
+from transparency_ros.analysis.discrepancy.problem import (
     Trace,
     position_noise,
     spectrum_peak,
 )
-from transparency_ros.analysis.discrepancy.drop_kernel import impact
-from transparency_ros.analysis.discrepancy.effects import drifted, pinned
-from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray, read_spec
 from transparency_ros.core.config import finite_number, get_actuator, load_drop_test
 from transparency_ros.core.contact_model import restitution_damping_ratio
 from transparency_ros.core.errors import ConfigError, ModelError

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from transparency_ros.analysis.discrepancy.discover import Problem, Report
+from transparency_ros.analysis.discrepancy.findings import Report
+from transparency_ros.analysis.discrepancy.problem import Problem
 
 
 def write_report(out: Path, problem: Problem, report: Report) -> list[Path]:

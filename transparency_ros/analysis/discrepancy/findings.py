@@ -1,0 +1,152 @@
+"""What the loop reports: a named effect (:class:`Finding`) with its parameters, intervals, where
+it acted and the evidence; the whole :class:`Report`; and what is left ``unexplained``, with
+where it sits and what it looks like."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from transparency_ros.analysis.discrepancy.model import FloatArray
+from transparency_ros.analysis.discrepancy.problem import Problem
+
+STATE_EXPLAINED = 0.3  # below: the leftover torque is not a function of the state
+LEFTOVER = 3.0  # a phase whose residual is above 3x the noise floor is left unexplained
+
+
+@dataclass(frozen=True)
+class Finding:
+    effect: str
+    parameters: dict[str, float]
+    confidence_interval: dict[str, tuple[float, float]]
+    where: dict[str, Any]
+    evidence: str
+    heldout_rmse_before: float
+    heldout_rmse_after: float
+    alternatives: list[str] = field(default_factory=list)  # explain the data as well
+
+
+@dataclass
+class Report:
+    nominal: dict[str, float]
+    split: dict[str, list[str]]
+    findings: list[Finding] = field(default_factory=list)
+    unexplained: list[dict[str, Any]] = field(default_factory=list)
+    heldout_rmse_nominal: float = math.nan
+    final_heldout_rmse: float = math.nan
+    seconds: float = 0.0
+    fitted: list[tuple[Any, FloatArray]] = field(default_factory=list)  # effects as found
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "findings": [vars(f) for f in self.findings],
+            "unexplained": self.unexplained,
+            "nominal": self.nominal,
+            "split": self.split,
+            "heldout_rmse_nominal": self.heldout_rmse_nominal,
+            "final_heldout_rmse": self.final_heldout_rmse,
+            "seconds": self.seconds,
+        }
+
+
+def locate(problem: Problem, before: FloatArray, after: FloatArray) -> dict[str, Any]:
+    """Where an effect acted: the motion phase whose held-out error it reduced most, and the
+    trial and time window of the largest reduction."""
+    gains = {}
+    for name, mask in problem.phases().items():
+        if mask.any():
+            gains[name] = float(
+                np.sqrt(np.mean(before[mask] ** 2)) - np.sqrt(np.mean(after[mask] ** 2))
+            )
+    phase = max(gains, key=lambda k: gains[k]) if gains else "all"
+    segment, labels = problem.segments()
+    count = np.bincount(segment, minlength=len(labels)).clip(1)
+    per_segment = np.sqrt(np.bincount(segment, before**2, len(labels)) / count) - np.sqrt(
+        np.bincount(segment, after**2, len(labels)) / count
+    )
+    trial, t0, t1 = labels[int(np.argmax(per_segment))]
+    return {
+        "phase": phase,
+        "rmse_reduction_by_phase_rad": gains,
+        "trial": trial,
+        "window_s": [round(t0, 4), round(t1, 4)],
+    }
+
+
+def update_findings(
+    report: Report,
+    effects: Sequence[Any],
+    params: Sequence[FloatArray],
+    intervals: Sequence[tuple[float, float]],
+) -> None:
+    """Parameters and intervals of the findings from a joint refit (intervals in the order
+    of the fittable effects' parameters)."""
+    k = 0
+    for i, (effect, p) in enumerate(zip(effects, params, strict=True)):
+        ci = report.findings[i].confidence_interval
+        if effect.fittable:
+            ci = dict(zip(effect.param_names, intervals[k : k + p.size], strict=True))
+            k += p.size
+        report.findings[i] = replace(
+            report.findings[i],
+            parameters={n: float(v) for n, v in zip(effect.param_names, p, strict=True)}
+            | effect.extra_parameters(p),
+            confidence_interval=ci,
+        )
+
+
+def leftover(
+    problem: Problem,
+    err: FloatArray,
+    effects: Sequence[Any] = (),
+    params: Sequence[FloatArray] = (),
+    closest: tuple[str, float] | None = None,
+) -> list[dict[str, Any]]:
+    """Structure the found effects do not explain: a phase whose residual is well above the
+    noise floor, with the frequency where the residual has most power, and the candidate
+    that came closest: ``closest`` = (its name, the share it would have removed)."""
+    floor = problem.noise_floor()
+    out = []
+    peak: float | None = None
+    explained: float | None = None
+    for name, mask in problem.phases().items():
+        if mask.sum() < 50:
+            continue
+        rms = float(np.sqrt(np.mean(err[mask] ** 2)))
+        if rms > LEFTOVER * floor:
+            if peak is None:
+                peak = problem.residual_peak_hz(effects, params)
+                explained = getattr(problem, "state_explained", lambda *_: None)(effects, params)
+            entry: dict[str, Any] = {
+                "where": {"phase": name},
+                "rmse_rad": rms,
+                "noise_floor_rad": floor,
+                "dominant_frequency_hz": peak,
+                "looks_like": f"residual {rms / floor:.0f}x the noise floor in phase "
+                f"'{name}'; the residual peaks near {peak:.1f} Hz",
+            }
+            if closest is not None and closest[1] > 0:
+                names, gain = closest
+                entry["closest_candidate"] = {"effect": names, "share_removed": gain}
+                entry["looks_like"] += (
+                    f"; the closest candidate, {names}, would remove {gain:.0%} of "
+                    "it, too little to name"
+                )
+            if explained is not None:
+                entry["state_explained_fraction"] = explained
+                entry["looks_like"] += (
+                    f"; position and velocity explain {max(explained, 0.0):.0%} of the "
+                    "torque residual on held-out trials"
+                    + (
+                        " (not a function of the state: an input the model does not see, "
+                        "such as a hand or a contact)"
+                        if explained < STATE_EXPLAINED
+                        else ""
+                    )
+                )
+            out.append(entry)
+    return out

@@ -1,0 +1,137 @@
+"""Fitting candidate effects: one effect's parameters (a scan of one-parameter effects, then
+bounded least squares), several effects' parameters together, 95 % intervals from the Jacobian,
+and the error measures the loop compares (RMSE, information criterion)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from transparency_ros.analysis.discrepancy.model import FloatArray
+from transparency_ros.analysis.discrepancy.problem import Problem
+
+GRID_POINTS = 25
+
+
+def rmse(err: FloatArray) -> float:
+    return float(np.sqrt(np.mean(err**2)))
+
+
+def aic(err: FloatArray, k: int) -> float:
+    n = err.size
+    return n * math.log(max(float(np.sum(err**2)), 1e-300) / n) + 2 * k
+
+
+def fit_candidate(
+    problem: Problem, effects: list[Any], params: list[FloatArray], new: Any
+) -> tuple[FloatArray, Any]:
+    """The parameters of ``new`` added to ``effects`` (theirs held) on the fitting trials:
+    (parameters, least-squares result); the result is None for an effect with nothing to fit."""
+    x0 = np.clip(problem.initial(new), new.lower, new.upper)
+    if not new.fittable:
+        return x0, None
+
+    def many(xs: Sequence[FloatArray]) -> list[FloatArray]:
+        return problem.error_sets([*effects, new], [[*params, x] for x in xs], False)
+
+    def residual(x: FloatArray) -> FloatArray:
+        return many([x])[0]
+
+    lower, upper = np.asarray(new.lower, dtype=float), np.asarray(new.upper, dtype=float)
+
+    if x0.size == 1:
+        # one parameter: scan its range first. Effects with a threshold (stiction,
+        # saturation) change the error in steps, where finite-difference gradients are zero.
+        # Then once more between the best point's neighbours, for a threshold's value.
+        grid = np.unique(np.r_[np.linspace(lower[0], upper[0], GRID_POINTS), x0])
+        for _ in range(2):
+            costs = [float(np.sum(r**2)) for r in many([np.array([g]) for g in grid])]
+            best = int(np.argmin(costs))
+            x0 = np.array([grid[best]])
+            grid = np.linspace(grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)], 25)
+    result = least_squares(
+        residual,
+        x0,
+        jac=lambda x: jacobian(many, x, upper),
+        bounds=(lower, upper),
+        x_scale="jac",
+        max_nfev=60,
+    )
+    if float(np.sum(result.fun**2)) > float(np.sum(residual(x0) ** 2)):
+        result.x = x0  # the local refinement did not help: keep the scanned value
+    return result.x, result
+
+
+def refit(
+    problem: Problem, effects: Sequence[Any], params: Sequence[FloatArray], start: int = 0
+) -> tuple[list[FloatArray], Any]:
+    """The fittable parameters of ``effects[start:]`` fitted together on the fitting trials
+    (the others held), from their current values; (params, least-squares result) or
+    (params, None) when there are fewer than two to fit or the joint fit is no better."""
+    index = [i for i, e in enumerate(effects) if e.fittable and i >= start]
+    if len(index) < 2:
+        return list(params), None
+    sizes = [params[i].size for i in index]
+    lower = np.concatenate([np.asarray(effects[i].lower, dtype=float) for i in index])
+    upper = np.concatenate([np.asarray(effects[i].upper, dtype=float) for i in index])
+    x0 = np.clip(np.concatenate([params[i] for i in index]), lower, upper)
+
+    def unpack(x: FloatArray) -> list[FloatArray]:
+        out, k = list(params), 0
+        for i, n in zip(index, sizes, strict=True):
+            out[i] = np.array(x[k : k + n])
+            k += n
+        return out
+
+    def many(xs: Sequence[FloatArray]) -> list[FloatArray]:
+        return problem.error_sets(effects, [unpack(x) for x in xs], False)
+
+    def residual(x: FloatArray) -> FloatArray:
+        return many([x])[0]
+
+    result = least_squares(
+        residual,
+        x0,
+        jac=lambda x: jacobian(many, x, upper),
+        bounds=(lower, upper),
+        x_scale="jac",
+        max_nfev=40,
+    )
+    if float(np.sum(result.fun**2)) >= float(np.sum(residual(x0) ** 2)):
+        return list(params), None
+    return unpack(result.x), result
+
+
+def interval(result: Any, x: FloatArray) -> list[tuple[float, float]]:
+    """95 % intervals of ``x`` from the least-squares fit's Jacobian (none: the value itself)."""
+    if result is None or result.jac is None:
+        return [(float(v), float(v)) for v in x]
+    dof = max(1, result.fun.size - x.size)
+    sigma2 = 2 * result.cost / dof
+    try:
+        cov = np.linalg.pinv(result.jac.T @ result.jac) * sigma2
+    except np.linalg.LinAlgError:
+        return [(math.nan, math.nan) for _ in x]
+    half = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
+    return [(float(v - h), float(v + h)) for v, h in zip(x, half, strict=True)]
+
+
+def jacobian(
+    many: Callable[[Sequence[FloatArray]], list[FloatArray]], x: FloatArray, upper: FloatArray
+) -> FloatArray:
+    """Forward differences of step 1e-3 max(1, |x|) (backwards at the upper bound), the
+    shifted points evaluated together with ``x`` in one call of ``many``."""
+    h = 1e-3 * np.maximum(1.0, np.abs(x))
+    h = np.where(x + h > upper, -h, h)
+    shifted = [x + np.eye(x.size)[i] * h[i] for i in range(x.size)]
+    base, *moved = many([x, *shifted])
+    return np.stack([(m - base) / h[i] for i, m in enumerate(moved)], axis=1)
+
+
+def parameter_count(effect: Any, x: FloatArray) -> int:
+    """Parameters an effect spends, its discrete choices included (cogging's period)."""
+    return int(x.size) + int(effect.discrete_choices)
