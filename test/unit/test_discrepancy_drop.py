@@ -149,7 +149,7 @@ def test_friction_outside_the_library_is_left_unexplained_with_the_closest_candi
 def test_the_drop_integrator_has_converged_at_its_step(tmp_path: Path) -> None:
     """Bounces, backlash and a contact spring at the default step against a 4x finer one: the
     difference in held-out error is a small part of the sensor noise."""
-    from transparency_ros.analysis.discrepancy import drop  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy import drop_physics  # noqa: PLC0415
 
     out = write_drop_campaign(tmp_path / "c", 3, hidden=[], actuator="EC60")
     problem = _problem(out)
@@ -163,8 +163,8 @@ def test_the_drop_integrator_has_converged_at_its_step(tmp_path: Path) -> None:
     ]
     default = [problem.held.error(replace(base, **c)) for c in cases]
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(drop, "SUBSTEPS", 4 * drop.SUBSTEPS)
-        mp.setattr(drop, "SPRING_SUBSTEPS", 4 * drop.SPRING_SUBSTEPS)
+        mp.setattr(drop_physics, "SUBSTEPS", 4 * drop_physics.SUBSTEPS)
+        mp.setattr(drop_physics, "SPRING_SUBSTEPS", 4 * drop_physics.SPRING_SUBSTEPS)
         finer = [problem.held.error(replace(base, **c)) for c in cases]
     for case, a, b in zip(cases, default, finer, strict=True):
         assert float(np.sqrt(np.mean((a - b) ** 2))) < 0.5 * floor, case

@@ -1,0 +1,144 @@
+"""The candidate effects of the drop test: each changes exactly the value of :class:`DropPhysics`
+where its physics acts (see :mod:`transparency_ros.analysis.discrepancy.drop`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from transparency_ros.analysis.discrepancy.drop_physics import DropPhysics
+from transparency_ros.analysis.discrepancy.effects import drifted, pinned
+from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
+
+if TYPE_CHECKING:
+    from transparency_ros.analysis.discrepancy.drop import DropProblem
+
+
+@dataclass
+class DropEffect:
+    name: str
+    param_names: tuple[str, ...]
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    fittable: bool = True
+    discrete_choices: int = 0
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        return np.array([(lo + hi) / 2 for lo, hi in zip(self.lower, self.upper, strict=True)])
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        raise NotImplementedError
+
+    def meaningful(self, p: FloatArray) -> bool:
+        """A fit held at a bound of its plausible range (a restitution of 0.95, a 3 degree
+        backlash, a rigid contact) stands in for something else: it names nothing."""
+        return not pinned(p, self.lower, self.upper)
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        return {}
+
+
+class DropDrift(DropEffect):
+    def __init__(self) -> None:
+        super().__init__(
+            "parameter_drift",
+            ("reflected_inertia_scale", "viscous_scale", "coulomb_scale"),
+            (0.2, 0.0, 0.0),
+            (5.0, 5.0, 5.0),
+        )
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        return np.ones(3)
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(
+            ph,
+            rotor_inertia_kgm2=ph.rotor_inertia_kgm2 * p[0],
+            viscous_nms_per_rad=ph.viscous_nms_per_rad * p[1],
+            coulomb_nm=ph.coulomb_nm * p[2],
+            static_nm=np.maximum(ph.static_nm, ph.coulomb_nm * p[2]),
+        )
+
+    def meaningful(self, p: FloatArray) -> bool:
+        return drifted(p) and not pinned(p, self.lower, self.upper)
+
+
+class SetPhysics(DropEffect):
+    """An effect that sets one value of the physics to its single parameter."""
+
+    def __init__(self, name: str, param: str, lower: float, upper: float, target: str) -> None:
+        super().__init__(name, (param,), (lower,), (upper,))
+        self.target = target
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        changes: dict[str, Any] = {self.target: float(p[0])}
+        return replace(ph, **changes)
+
+
+class DropStiction(DropEffect):
+    def __init__(self) -> None:
+        super().__init__("stiction", ("static_nm",), (0.0,), (2.0,))
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, static_nm=np.maximum(ph.coulomb_nm, float(p[0])))
+
+
+class ImpactSpeedLoss(SetPhysics):
+    """Rail friction: the shuttle arrives slower than free fall."""
+
+    def __init__(self, shuttle_mass_kg: float) -> None:
+        super().__init__("impact_speed_loss", "rail_friction_n", 0.0, 5.0, "rail_friction_n")
+        self.shuttle_mass_kg = shuttle_mass_kg
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        # v^2 = 2 (g - F/m) h: the fraction of the free-fall speed lost at impact
+        return {
+            "speed_loss_fraction": float(
+                1 - math.sqrt(max(0.0, 1 - p[0] / (self.shuttle_mass_kg * GRAVITY)))
+            )
+        }
+
+
+class StructuralCompliance(DropEffect):
+    """The contact (arm, load cell, shuttle) is a spring: the collision takes time."""
+
+    def __init__(self) -> None:
+        super().__init__("structural_compliance", ("log10_stiffness_n_per_m",), (3.0,), (6.0,))
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, stiffness_n_per_m=float(10 ** p[0]))
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        return {"stiffness_n_per_m": float(10 ** p[0])}
+
+
+class DropQuantization(DropEffect):
+    def __init__(self) -> None:
+        super().__init__("quantization", ("step_rad",), (1e-7,), (0.1,), fittable=False)
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        steps = np.concatenate([np.abs(np.diff(t.q)) for t in problem.fit_trials])
+        nonzero = steps[steps > 1e-12]
+        return np.array([float(np.min(nonzero)) if nonzero.size else 1e-6])
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, encoder_step_rad=float(p[0]))
+
+
+def drop_library(shuttle_mass_kg: float) -> list[DropEffect]:
+    return [
+        DropDrift(),
+        SetPhysics("torque_offset", "offset_nm", -2.0, 2.0, "torque_offset_nm"),
+        # the shuttle's weight on the arm, m_s g r cos(theta), while they touch
+        SetPhysics("payload_gravity", "mgl_nm", 0.0, 5.0, "weight_torque_nm"),
+        DropStiction(),
+        SetPhysics("restitution", "coefficient", 0.0, 0.95, "restitution"),
+        ImpactSpeedLoss(shuttle_mass_kg),
+        StructuralCompliance(),
+        SetPhysics("backlash", "backlash_rad", 0.0, 0.05, "backlash_rad"),
+        SetPhysics("sensor_delay", "delay_s", 0.0, 0.02, "delay_s"),
+        DropQuantization(),
+    ]
