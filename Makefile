@@ -18,13 +18,14 @@ export ROS_DOMAIN_ID := $(shell $(PYTHON) transparency_ros/rosenv.py)
 # Plots are written to files; never try to open a window.
 export MPLBACKEND := Agg
 
-.PHONY: all demo test lint typecheck pytest bench fuzz lock clean help
+.PHONY: all demo test lint typecheck pytest bench fuzz docs lock clean help
 all: test
 
 help:
 	@echo "make demo   run the demonstration into $(DEMO_OUT)/"
 	@echo "make test   lint, type-check and run the test suite"
 	@echo "make bench  run the benchmarks (benchmarks/), results in benchmarks/results/"
+	@echo "make docs   regenerate the parameter tables, config/<node>.yaml and the subcommand table"
 	@echo "make fuzz   fuzz the bag reader, CAN decoders and CDR reader (FUZZ_SECONDS=$(FUZZ_SECONDS) each)"
 	@echo "make lock   re-resolve requirements/*.in into requirements/constraints.txt"
 	@echo "make clean  remove .venv and generated output"
@@ -62,6 +63,10 @@ bench: $(STAMP)
 # Bounded mutational fuzzing (not part of make test); findings: benchmarks/results/fuzz/, status 1.
 fuzz: $(STAMP)
 	$(BIN)/python benchmarks/fuzz.py --seconds $(FUZZ_SECONDS)
+
+# The docs' generated parts (parameter tables, subcommands) and config/<node>.yaml, from the code.
+docs: $(STAMP)
+	$(BIN)/python -m transparency_ros.ros.docgen
 
 # Re-resolve the pins (run by a maintainer, then commit requirements/constraints.txt).
 lock:
