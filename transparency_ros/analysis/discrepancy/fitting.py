@@ -38,9 +38,6 @@ def fit_candidate(
     def many(xs: Sequence[FloatArray]) -> list[FloatArray]:
         return problem.error_sets([*effects, new], [[*params, x] for x in xs], False)
 
-    def residual(x: FloatArray) -> FloatArray:
-        return many([x])[0]
-
     lower, upper = np.asarray(new.lower, dtype=float), np.asarray(new.upper, dtype=float)
 
     if x0.size == 1:
@@ -53,15 +50,8 @@ def fit_candidate(
             best = int(np.argmin(costs))
             x0 = np.array([grid[best]])
             grid = np.linspace(grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)], 25)
-    result = least_squares(
-        residual,
-        x0,
-        jac=lambda x: jacobian(many, x, upper),
-        bounds=(lower, upper),
-        x_scale="jac",
-        max_nfev=60,
-    )
-    if float(np.sum(result.fun**2)) > float(np.sum(residual(x0) ** 2)):
+    result, start_cost = _bounded_least_squares(many, x0, lower, upper, max_nfev=60)
+    if float(np.sum(result.fun**2)) > start_cost:
         result.x = x0  # the local refinement did not help: keep the scanned value
     return result.x, result
 
@@ -90,6 +80,23 @@ def refit(
     def many(xs: Sequence[FloatArray]) -> list[FloatArray]:
         return problem.error_sets(effects, [unpack(x) for x in xs], False)
 
+    result, start_cost = _bounded_least_squares(many, x0, lower, upper, max_nfev=40)
+    if float(np.sum(result.fun**2)) >= start_cost:
+        return list(params), None
+    return unpack(result.x), result
+
+
+def _bounded_least_squares(
+    many: Callable[[Sequence[FloatArray]], list[FloatArray]],
+    x0: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+    max_nfev: int,
+) -> tuple[Any, float]:
+    """Bounded least squares on the error ``many([x])[0]``, its Jacobian from forward
+    differences evaluated in one batch; (result, the cost at ``x0``), so that the caller keeps
+    ``x0`` where the fit does not improve on it."""
+
     def residual(x: FloatArray) -> FloatArray:
         return many([x])[0]
 
@@ -99,11 +106,9 @@ def refit(
         jac=lambda x: jacobian(many, x, upper),
         bounds=(lower, upper),
         x_scale="jac",
-        max_nfev=40,
+        max_nfev=max_nfev,
     )
-    if float(np.sum(result.fun**2)) >= float(np.sum(residual(x0) ** 2)):
-        return list(params), None
-    return unpack(result.x), result
+    return result, float(np.sum(residual(x0) ** 2))
 
 
 def interval(result: Any, x: FloatArray) -> list[tuple[float, float]]:
