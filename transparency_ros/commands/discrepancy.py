@@ -128,6 +128,8 @@ def run_discrepancy(args: argparse.Namespace) -> int:
         return 0
     print(f"nominal: {', '.join(f'{k} {v:g}' for k, v in report.nominal.items())}")
     print(f"held-out trials: {', '.join(report.split['heldout'])}")
+    for note in report.notes:
+        print(f"note: {note}")
     print(f"held-out simulation RMSE, nominal: {report.heldout_rmse_nominal:.4g} rad")
     for f in report.findings:
         params = ", ".join(f"{k} {v:.4g}" for k, v in f.parameters.items())

@@ -111,7 +111,7 @@ class Discoverer:
     def run(self) -> Report:
         started = time.perf_counter()
         problem = self.problem
-        report = Report(problem.nominal, problem.split)
+        report = Report(problem.nominal, problem.split, notes=list(getattr(problem, "notes", [])))
         effects: list[Any] = []
         params: list[FloatArray] = []
         held_err = problem.error(effects, params, True)

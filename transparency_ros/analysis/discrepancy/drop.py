@@ -33,6 +33,7 @@ and simulator in ``drop_physics``, the candidate effects in ``drop_effects``.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 
 import numpy as np
@@ -48,6 +49,7 @@ from transparency_ros.analysis.discrepancy.drop_physics import (
 )
 from transparency_ros.analysis.discrepancy.drop_trials import (
     LEAD_S,
+    MODEL_STRIKE_SIGN,
     DropTrial,
     load_drop_trial,
     rest_position,
@@ -69,11 +71,18 @@ class _Set:
         self.trials = list(trials)
         self.sim = DropSimulator(trials)
         self.fall: list[tuple[FloatArray, FloatArray]] = []  # (t since release, height)
+        # a recording without its release: the fall's start (height, time) is fitted for each
+        # acceleration tried (a projection onto [1, t]); only the fall's curvature is compared
+        self.fall_projection: list[FloatArray | None] = []
         self.q: list[tuple[FloatArray, FloatArray]] = []  # (t since piece start, q)
         self.h: list[tuple[FloatArray, FloatArray]] = []  # (t since piece start, height)
         for t in trials:
             fall = (t.t_h > t.release_s) & (t.t_h < t.start_s)
             self.fall.append((t.t_h[fall][::10] - t.release_s, t.height[fall][::10]))
+            basis = np.stack([np.ones_like(self.fall[-1][0]), self.fall[-1][0]], axis=1)
+            self.fall_projection.append(
+                None if t.release_recorded else basis @ np.linalg.pinv(basis)
+            )
             sel = (t.t_q >= t.start_s) & (t.t_q <= t.end_s)
             self.q.append((t.t_q[sel] - t.start_s, t.q[sel]))
             sel = (t.t_h >= t.start_s) & (t.t_h <= t.end_s)
@@ -97,7 +106,12 @@ class _Set:
                 # the fall: free fall from the hold, braked by the rail
                 t_f, h_f = self.fall[i]
                 a = GRAVITY - rail_n[row] / trial.mass_kg
-                parts.append((trial.held_height_m - 0.5 * a * t_f**2 - h_f) / r)
+                projection = self.fall_projection[i]
+                if projection is None:
+                    parts.append((trial.held_height_m - 0.5 * a * t_f**2 - h_f) / r)
+                else:  # h + a t^2 / 2 is linear in t when the model is right
+                    y = h_f + 0.5 * a * t_f**2
+                    parts.append((projection @ y - y) / r)
                 t_q, q = self.q[i]
                 q_model = np.interp(t_q - delay_s[row], t_sim, q_sim[row])
                 step = step_rad[row]
@@ -159,6 +173,7 @@ class DropProblem:
             "fit": [t.name for t in self.fit_trials],
             "heldout": [t.name for t in self.held_trials],
         }
+        self.notes = conventions(trials)
 
     def physics(
         self, effects: Sequence[DropEffect], params: Sequence[FloatArray], n: int
@@ -283,6 +298,19 @@ class DropProblem:
             np.interp(t_q - ph.delay_s, t_sim, q_fin[i]),
             "encoder position [rad]",
         )
+
+
+def conventions(trials: Sequence[DropTrial]) -> list[str]:
+    """What the analysis assumed or detected about the rig, in words a user can act on: the
+    strike's direction over all trials, then each trial's own notes."""
+    turn = {1: "positive", -1: "negative"}
+    signs = Counter(t.strike_sign for t in trials)
+    parts = [f"{turn[k]} theta in {n} of {len(trials)} trials" for k, n in sorted(signs.items())]
+    convention = "the model's convention" if set(signs) == {MODEL_STRIKE_SIGN} else "see below"
+    notes = [f"strike direction: {', '.join(parts)} ({convention})"]
+    for trial in trials:
+        notes += [f"{trial.name}: {note}" for note in trial.notes]
+    return notes
 
 
 def _phase_masks(trial: DropTrial, t: FloatArray) -> dict[str, BoolArray]:

@@ -1,6 +1,17 @@
 """A drop-test bag as the discrepancy tool reads it (:class:`DropTrial`): the encoder, shuttle
 height and load cell in seconds from the bag's first sample, the recorded contact, the release
-and the fall's parabola; and the state a trial's impact piece starts from."""
+and the fall's parabola; and the state a trial's impact piece starts from.
+
+Rigs differ in what the bag contract leaves open, so a trial says what it found (``notes``):
+
+* the strike's direction: the model turns the arm to negative theta (tip height r sin theta);
+  a rig whose strike turns it to positive theta is analysed mirrored (theta -> -theta). The
+  direction comes from ``custom_data`` ``transparency.strike_sign`` (+1 / -1) when the bag has
+  it, else from the data (the arm's first swing after contact);
+* a recording that starts during the fall (triggered near contact): the release is not recorded,
+  and the fall is fitted from the part that is; its parabola's vertex stands for the release;
+* no /joint_commands: theta_d is the arm's rest position before contact.
+"""
 
 from __future__ import annotations
 
@@ -18,6 +29,9 @@ from transparency_ros.core.errors import ModelError
 
 LEAD_S = 0.003  # the impact piece starts this long before the recorded contact
 AFTER_S = 0.25  # and lasts this long after it
+SWING_S = 0.03  # the arm's first swing after contact, which shows the strike's direction
+STRIKE_SIGN_KEY = "transparency.strike_sign"
+MODEL_STRIKE_SIGN = -1  # the model's convention: a strike turns the arm to negative theta
 
 
 @dataclass(frozen=True)
@@ -42,6 +56,9 @@ class DropTrial:
     held_height_m: float
     # the fall's parabola h = c2 (t - mid)^2 + c1 (t - mid) + c0 as (c2, c1, c0, mid)
     fall: tuple[float, float, float, float] | None = None
+    strike_sign: int = MODEL_STRIKE_SIGN  # the rig's: q and theta_d above are mirrored if +1
+    release_recorded: bool = True  # False: the recording starts during the fall
+    notes: tuple[str, ...] = ()  # what was assumed or detected, in words a user can act on
 
     @property
     def start_s(self) -> float:
@@ -73,11 +90,13 @@ def load_drop_trial(path: str | Path) -> DropTrial:
             bag, "/load_cell", "geometry_msgs/msg/WrenchStamped", "wrench.force.z"
         )
         height = scalar_series(bag, "/shuttle/height", "geometry_msgs/msg/PointStamped", "point.z")
-        theta_d = 0.0
+        theta_d: float | None = None
         if "/joint_commands" in bag.topics:
             commands = joint_series(bag, "/joint_commands")
             finite = commands.position[np.isfinite(commands.position)]
-            theta_d = float(finite[-1]) if finite.size else 0.0
+            theta_d = float(finite[-1]) if finite.size else None
+        declared = _declared_sign(bag.custom_data.get(STRIKE_SIGN_KEY), p)
+    notes: list[str] = []
     keep = np.isfinite(states.position)
     t0_ns = int(min(states.stamp_ns[0], height.stamp_ns[0]))  # exact; seconds from there on
     t_q, q = states.seconds(t0_ns)[keep], states.position[keep]
@@ -92,7 +111,22 @@ def load_drop_trial(path: str | Path) -> DropTrial:
     contact_end = float(t_h[below[0]]) if below.size else contact + 0.02
     if q.size < 20 or np.count_nonzero(t_q < contact - LEAD_S) < 5:
         raise BagReadError(f"{p}: /joint_states has too few samples before contact")
-    held, release, fall = _release(t_h, h, contact, p)
+    held, release, fall, recorded = _release(t_h, h, contact, p)
+    if not recorded:
+        notes.append(
+            f"the recording starts {contact - float(t_h[0]):.3g} s before contact, during the "
+            "fall: the release is not recorded, the fall is fitted from the recorded part"
+        )
+    rest = float(np.median(q[t_q < contact - LEAD_S][-10:]))
+    if theta_d is None:
+        theta_d = rest
+        notes.append(
+            f"no /joint_commands: theta_d taken as the arm's rest position before contact, "
+            f"{rest:.4g} rad"
+        )
+    sign = _strike_sign(t_q, q, rest, contact, declared, notes=notes)
+    if sign != MODEL_STRIKE_SIGN:
+        q, theta_d = -q, -theta_d
     return DropTrial(
         name=f"{p.parent.name}/{p.name}",
         actuator=custom["transparency.actuator"],
@@ -111,30 +145,106 @@ def load_drop_trial(path: str | Path) -> DropTrial:
         release_s=release,
         held_height_m=held,
         fall=fall,
+        strike_sign=sign,
+        release_recorded=recorded,
+        notes=tuple(notes),
     )
+
+
+def _declared_sign(value: str | None, where: Path) -> int | None:
+    if value is None:
+        return None
+    try:
+        sign = int(float(value))
+    except ValueError:
+        sign = 0
+    if sign not in (-1, 1):
+        raise BagReadError(
+            f"{where}: custom_data {STRIKE_SIGN_KEY} must be +1 or -1, got {value!r}"
+        )
+    return sign
+
+
+def _strike_sign(
+    t_q: FloatArray, q: FloatArray, rest: float, contact: float, declared: int | None,
+    *, notes: list[str],
+) -> int:  # fmt: skip
+    """The direction a strike turns the arm: declared, or that of the largest excursion from
+    rest in the first swing after contact (too small to tell: the model's)."""
+    swing = q[(t_q >= contact) & (t_q <= contact + SWING_S)] - rest
+    before = q[t_q < contact - LEAD_S][-50:]
+    resolution = max(float(np.ptp(before)) if before.size else 0.0, 1e-9)
+    peak = float(swing[np.argmax(np.abs(swing))]) if swing.size else 0.0
+    seen = int(np.sign(peak)) if abs(peak) > 3 * resolution else 0
+    turn = {1: "positive", -1: "negative"}
+    if declared is not None:
+        if seen and seen != declared:
+            notes.append(
+                f"the arm turned to {turn[seen]} theta after contact ({peak:+.3g} rad), opposite "
+                f"to the declared {STRIKE_SIGN_KEY} {declared:+d}: check the encoder direction "
+                "or the declared sign (analysed with the declared one)"
+            )
+        elif declared != MODEL_STRIKE_SIGN:
+            notes.append(
+                f"a strike turns this rig's arm to {turn[declared]} theta ({STRIKE_SIGN_KEY} "
+                f"{declared:+d}): analysed mirrored (theta -> -theta)"
+            )
+        return declared
+    if not seen:
+        notes.append(
+            f"the arm hardly moved after contact ({peak:+.3g} rad): the strike's direction is "
+            f"taken as the model's ({turn[MODEL_STRIKE_SIGN]} theta); set {STRIKE_SIGN_KEY} "
+            "if it is the other"
+        )
+        return MODEL_STRIKE_SIGN
+    if seen != MODEL_STRIKE_SIGN:
+        notes.append(
+            f"a strike turns this rig's arm to {turn[seen]} theta (detected: {peak:+.3g} rad in "
+            f"the first {SWING_S * 1e3:.0f} ms after contact); analysed mirrored "
+            f"(theta -> -theta). Set {STRIKE_SIGN_KEY} to declare it"
+        )
+    return seen
 
 
 def _release(
     t: FloatArray, h: FloatArray, contact: float, where: Path
-) -> tuple[float, float, tuple[float, float, float, float] | None]:
-    """(held height, release time, the fall's parabola). The fall under any constant force is
-    a parabola h0 - a/2 (t - t_r)^2, so its vertex is the release: a quadratic fitted to the
-    whole fall (up to the impact piece) gives t_r without assuming g or a rail without
-    friction, and the shuttle's state at the impact piece's start from all of the fall."""
+) -> tuple[float, float, tuple[float, float, float, float] | None, bool]:
+    """(held height, release time, the fall's parabola, whether the release is recorded). The
+    fall under any constant force is a parabola h0 - a/2 (t - t_r)^2, so its vertex is the
+    release: a quadratic fitted to the whole recorded fall (up to the impact piece) gives t_r
+    without assuming g or a rail without friction, and the shuttle's state at the impact
+    piece's start from all of the fall. A recording that starts during the fall has no hold: the
+    vertex also gives the height it fell from."""
     first = t < t[0] + 0.02
-    held = float(np.median(h[first]))
+    if np.count_nonzero(first) < 10:
+        raise ModelError(f"{where}: fewer than 10 /shuttle/height samples in its first 20 ms")
     noise = float(np.median(np.abs(np.diff(h[first], n=2)))) / 0.6745 / math.sqrt(6)
-    gone = np.nonzero((h < held - max(6 * noise, 1e-4)) & (t < contact))[0]
-    if gone.size == 0 or np.count_nonzero(first) < 10:
-        raise ModelError(f"{where}: no hold before the release in /shuttle/height")
-    fit = (t >= t[gone[0]]) & (t < contact - LEAD_S)
+    slope = float(np.polyfit(t[first] - t[0], h[first], 1)[0])
+    falling = -slope * 0.02 > max(6 * noise, 1e-4)  # already moving: no hold recorded
+    held = float(np.median(h[first]))
+    if falling:
+        start = 0
+    else:
+        gone = np.nonzero((h < held - max(6 * noise, 1e-4)) & (t < contact))[0]
+        if gone.size == 0:
+            raise ModelError(f"{where}: the shuttle never leaves its hold in /shuttle/height")
+        start = int(gone[0])
+    fit = (t >= t[start]) & (t < contact - LEAD_S)
     if np.count_nonzero(fit) < 10:
-        return held, float(t[gone[0]]), None
+        if falling:
+            raise ModelError(
+                f"{where}: the recording starts {contact - float(t[0]):.3g} s before contact, "
+                "too little of the fall to fit"
+            )
+        return held, float(t[start]), None, True
     mid = float(np.mean(t[fit]))
     c2, c1, c0 = (float(c) for c in np.polyfit(t[fit] - mid, h[fit], 2))
     if c2 >= 0:
         raise ModelError(f"{where}: the shuttle does not fall after the release")
-    return held, mid - c1 / (2 * c2), (c2, c1, c0, mid)
+    release = mid - c1 / (2 * c2)
+    if falling:
+        held = c0 - c1 * c1 / (4 * c2)  # the vertex: the height it fell from
+    return held, release, (c2, c1, c0, mid), not falling
 
 
 def rest_position(trial: DropTrial) -> float:

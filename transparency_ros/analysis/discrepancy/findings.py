@@ -40,9 +40,11 @@ class Report:
     final_heldout_rmse: float = math.nan
     seconds: float = 0.0
     fitted: list[tuple[Any, FloatArray]] = field(default_factory=list)  # effects as found
+    notes: list[str] = field(default_factory=list)  # what was assumed or detected about the data
 
     def as_dict(self) -> dict[str, Any]:
         return {
+            "notes": self.notes,
             "findings": [vars(f) for f in self.findings],
             "unexplained": self.unexplained,
             "nominal": self.nominal,

@@ -64,6 +64,8 @@ def write_report(out: Path, problem: Problem, report: Report) -> list[Path]:
         )
     for u in report.unexplained:
         rows.append(f"| - | unexplained | - | {u['where']['phase']} | {u['looks_like']} |")
+    if report.notes:
+        rows += ["", "Notes on the data:", "", *(f"- {note}" for note in report.notes)]
     table = out / "improvement.md"
     table.write_text("\n".join(rows) + "\n", encoding="utf-8")
     return [png, table]
