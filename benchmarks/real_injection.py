@@ -37,10 +37,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _results import write_results  # noqa: E402
+from _results import write_results
 
-from transparency_ros.analysis.discrepancy.discover import discover  # noqa: E402
-from transparency_ros.analysis.discrepancy.model import (  # noqa: E402
+from transparency_ros.analysis.discrepancy.discover import discover
+from transparency_ros.analysis.discrepancy.model import (
     NominalModel,
     Trial,
     load_nominal,
