@@ -51,7 +51,7 @@ pytest: $(STAMP)
 
 test: lint typecheck pytest
 
-# All benchmarks, one run (about 10 min on 2 cores; the first run also writes a 10M-message bag
+# All benchmarks, one run (about 20 min on 2 cores; the first run also writes a 10M-message bag
 # into benchmarks/.cache/). Results: benchmarks/results/*.md, quoted in the README.
 bench: $(STAMP)
 	$(BIN)/python benchmarks/contact_latency.py
@@ -59,6 +59,8 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/model_sweep.py
 	$(BIN)/python benchmarks/discrepancy_scaling.py
 	$(BIN)/python benchmarks/driver_loop.py
+	$(BIN)/python benchmarks/independent_rig.py
+	$(BIN)/python benchmarks/real_injection.py
 
 # Bounded mutational fuzzing (not part of make test); findings: benchmarks/results/fuzz/, status 1.
 fuzz: $(STAMP)

@@ -11,8 +11,9 @@ actuator output. More physics than eq. (2), because a real rig has it:
   encoder resolution) is :class:`~transparency_ros.core.actuator_physics.ActuatorPhysics`.
 
 Geometry: the arm is horizontal at theta = 0; the shuttle's contact face is ``height`` above the
-arm tip's rest position; the tip's height is r sin(theta), so a strike turns the arm to negative
-theta. The rig samples its sensors on a fixed 10 kHz grid, like the paper's DAQ: the load cell
+arm tip's rest position (where the arm rests at the release, which friction may leave away from
+theta = 0); the tip's height is r sin(theta), so a strike turns the arm to negative theta. The
+rig samples its sensors on a fixed 10 kHz grid, like the paper's DAQ: the load cell
 (contact force, N) and the potentiometer (height of the contact face, m), each with Gaussian
 noise of the given standard deviation (seeded: a trial is reproducible).
 """
@@ -75,6 +76,7 @@ class RigParams:
 class ShuttleState:
     released: bool = False
     height_m: float = 0.0  # contact face above the arm tip's rest position
+    tip_rest_m: float = 0.0  # the tip's height r sin(theta) where the arm rested at the release
     velocity_m_s: float = 0.0  # positive up
     force_n: float = 0.0  # contact force on the shuttle (load cell), positive pushing up
     release_s: float | None = None
@@ -135,10 +137,12 @@ class DropRig:
         if not s.released:
             self._sample(time_s)  # the DAQ runs while the shuttle is held too
             return 0.0
+        r = p.arm_length_m
         if s.release_s is None:
             s.release_s = time_s
-        r = p.arm_length_m
-        tip_height = r * math.sin(position_rad)
+            s.tip_rest_m = r * math.sin(position_rad)
+        # heights are above the tip at rest (the bag contract), wherever friction stopped the arm
+        tip_height = r * math.sin(position_rad) - s.tip_rest_m
         tip_speed = r * math.cos(position_rad) * velocity_rad_s
         penetration = tip_height - s.height_m
         force = 0.0

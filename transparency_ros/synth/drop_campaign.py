@@ -82,6 +82,9 @@ class Shuttle:
     released: bool = False
     on_arm: bool = False
     _last_s: float | None = None
+    _cos2: float = 1.0  # cos^2 of the arm's angle at the last torque_nm call
+    # the tip's height at rest, r sin(q) at the release: heights are above it (the bag contract)
+    tip_rest_m: float | None = None
 
     @property
     def damping_ns_per_m(self) -> float:
@@ -90,21 +93,29 @@ class Shuttle:
 
     @property
     def inertia_kgm2(self) -> float:
-        return self.arm_inertia_kgm2 + (self.mass_kg * self.arm_m**2 if self.on_arm else 0.0)
+        """The arm, and the shuttle while it rides the tip on its vertical rail: m r^2 cos^2 q
+        (read each substep, at the angle of the substep before)."""
+        riding = self.mass_kg * self.arm_m**2 * self._cos2 if self.on_arm else 0.0
+        return self.arm_inertia_kgm2 + riding
 
     def torque_nm(self, position_rad: float, velocity_rad_s: float, time_s: float) -> float:
         dt = 0.0 if self._last_s is None else time_s - self._last_s
         self._last_s = time_s
         r, m = self.arm_m, self.mass_kg
         cos = math.cos(position_rad)
-        tip_y, tip_v = r * math.sin(position_rad), r * cos * velocity_rad_s
+        self._cos2 = cos * cos
+        if self.released and self.tip_rest_m is None:
+            self.tip_rest_m = r * math.sin(position_rad)
+        tip_y = r * math.sin(position_rad) - (self.tip_rest_m or 0.0)
+        tip_v = r * cos * velocity_rad_s
         weight = m * GRAVITY if self.weight_on_arm else 0.0
-        if self.on_arm:  # rides on the tip
+        if self.on_arm:  # rides on the tip (y = r sin q): exact at any angle
             self.height_m, self.velocity_m_s = tip_y, tip_v
             rail = self.rail_friction_n * (1.0 if tip_v > 0 else -1.0 if tip_v < 0 else 0.0)
             self.force_n = weight
             self.impulse_ns += weight * dt
-            return -(weight + rail) * r * cos
+            riding = m * r * r * cos * math.sin(position_rad) * velocity_rad_s**2
+            return -(weight + rail) * r * cos + riding
         if not self.released:
             return 0.0
         pen = tip_y - self.height_m if self.compliant else 0.0
@@ -131,7 +142,8 @@ class Shuttle:
             return
         r, m = self.arm_m, self.mass_kg
         cos = math.cos(s.load_position_rad)
-        tip_y, tip_v = r * math.sin(s.load_position_rad), r * cos * s.load_velocity_rad_s
+        tip_y = r * math.sin(s.load_position_rad) - (self.tip_rest_m or 0.0)
+        tip_v = r * cos * s.load_velocity_rad_s
         u = self.velocity_m_s - tip_v
         if self.height_m > tip_y or u >= 0:
             return
@@ -203,9 +215,11 @@ def simulate_drop(
         compliant=compliant,
     )
     physics = ActuatorPhysics(params, shuttle, max_step_s=2e-5)
-    law = ImpedanceLaw(
-        drop.k_s_nm_per_rad, 0.0, 0.0, 0.0, hidden.get("torque_offset", {}).get("offset_nm", 0.0)
-    )
+    offset = hidden.get("torque_offset", {}).get("offset_nm", 0.0)
+    law = ImpedanceLaw(drop.k_s_nm_per_rad, 0.0, 0.0, 0.0, offset)
+    # the arm at rest before the drop, as a rig waits for it: where the offset holds it
+    rest = offset / drop.k_s_nm_per_rad
+    physics.state.motor_position_rad = physics.state.load_position_rad = rest
     rng = np.random.default_rng(seed)
     fall_s = math.sqrt(2 * height_m / GRAVITY) * 1.1
     total = hold_s + fall_s + after_s

@@ -54,6 +54,7 @@ from transparency_ros.core.errors import ModelError
 
 PAIR_FINALISTS = 3  # pairs refitted with the effects found before them
 SIGNIFICANT = 1.5  # a held-out error within 1.5x the noise floor has nothing left to explain
+EXPECTED_MARGIN = 1.10  # an effect the recording predicts is preferred this close to the best
 
 
 @dataclass
@@ -217,16 +218,34 @@ class Discoverer:
             and all(step.aic < a - 10 for a in step.alone_aic)
         )
 
-    @staticmethod
-    def _choose(steps: list[_Step]) -> _Step | None:
+    def _choose(self, steps: list[_Step]) -> _Step | None:
         """The best step by the information criterion. Steps that explain the held-out data
         alike (within 5 % RMSE) cannot be told apart here: the one with the fewest parameters
-        is named, the others are listed as alternatives."""
+        is named, the others are listed as alternatives. Between steps of as many parameters,
+        one whose fitted values the recording itself predicts comes first (``expected`` of the
+        problem: on a drop test, a payload of the shuttle's own m g r, which a constant offset
+        imitates at small arm angles, or an offset that held the arm away from theta_d before
+        contact), and such a step is considered up to 10 % behind the best."""
         if not steps:
             return None
+        expected = getattr(self.problem, "expected", lambda _e, _p: False)
         top = min(steps, key=lambda c: c.aic)
         alike = [c for c in steps if c.rmse <= 1.05 * top.rmse]
-        best = min(alike, key=lambda c: (sum(parameter_count(a, p) for a, p in c.new()), c.aic))
+        # what the recording predicts may be 10 % behind the best and still be preferred
+        predicted = [
+            c for c in steps
+            if c.rmse <= EXPECTED_MARGIN * top.rmse and all(expected(a, p) for a, p in c.new())
+        ]  # fmt: skip
+        if predicted and not any(c in predicted for c in alike):
+            alike = [*alike, *predicted]
+        best = min(
+            alike,
+            key=lambda c: (
+                sum(parameter_count(a, p) for a, p in c.new()),
+                not all(expected(a, p) for a, p in c.new()),
+                c.aic,
+            ),
+        )
         best.alternatives = ["+".join(a.name for a in c.added) for c in alike if c is not best]
         return best
 

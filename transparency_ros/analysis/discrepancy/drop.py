@@ -190,6 +190,20 @@ class DropProblem:
             ph = effect.apply(ph, p, self)
         return ph
 
+    def expected(self, effect: DropEffect, p: FloatArray) -> bool:
+        """Whether the recording itself predicts this fitted effect, within 30 %: the shuttle's
+        weight on the arm (m_s g r from its custom_data), unless the arm was already held away
+        from theta_d before contact; a constant torque offset, when it was (k_s (theta_d - rest)
+        = -offset: a torque the weight, which acts only in contact, cannot explain)."""
+        trials = self.fit_trials + self.held_trials
+        held = -float(np.median([t.k_s * (t.theta_d - rest_position(t)) for t in trials]))
+        if effect.name == "payload_gravity":
+            weight = float(np.mean([t.mass_kg * GRAVITY * t.arm_m for t in trials]))
+            return abs(float(p[0]) - weight) <= 0.3 * weight and abs(held) < 0.3 * weight
+        if effect.name == "torque_offset":
+            return abs(float(p[0]) - held) <= 0.3 * abs(float(p[0]))
+        return False
+
     def candidates(self) -> list[DropEffect]:
         return list(self._candidates)
 

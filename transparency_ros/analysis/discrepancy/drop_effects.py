@@ -13,6 +13,8 @@ from transparency_ros.analysis.discrepancy.drop_physics import DropPhysics
 from transparency_ros.analysis.discrepancy.effects import drifted, pinned
 from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
 
+LOCAL_GRAVITY_SPREAD = 0.005  # of the weight: what local gravity may differ from the tool's g
+
 if TYPE_CHECKING:
     from transparency_ros.analysis.discrepancy.drop import DropProblem
 
@@ -92,6 +94,13 @@ class ImpactSpeedLoss(SetPhysics):
     def __init__(self, shuttle_mass_kg: float) -> None:
         super().__init__("impact_speed_loss", "rail_friction_n", 0.0, 5.0, "rail_friction_n")
         self.shuttle_mass_kg = shuttle_mass_kg
+
+    def meaningful(self, p: FloatArray) -> bool:
+        """Gravity differs by about 0.3 % over the Earth (9.78-9.83 m/s^2): a braking force
+        below half a percent of the shuttle's weight cannot be told from the local g (a rig
+        simulated with 9.80665 instead of the tool's 9.81 was named 'rail friction')."""
+        weight = self.shuttle_mass_kg * GRAVITY
+        return super().meaningful(p) and float(p[0]) >= LOCAL_GRAVITY_SPREAD * weight
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         # v^2 = 2 (g - F/m) h: the fraction of the free-fall speed lost at impact

@@ -205,6 +205,10 @@ def forces(row: Any, s: Any, dt: float) -> tuple[float, float, float]:
             acc_y = force / m - weight / (m * r)
     elif s[GLUED]:
         load = -weight * cos
+    if s[GLUED]:
+        # the shuttle rides the tip on its vertical rail (y = r sin q): its share of the inertia
+        # is m r^2 cos^2 q (joint_step) and it adds m r^2 cos q sin q q'^2 (exact at any angle)
+        load += m * r * r * cos * math.sin(s[QL]) * s[WL] * s[WL]
     # rail friction against the shuttle's motion; a glued shuttle passes it to the arm
     rail = row[RAIL] * sign(s[V])
     if s[GLUED]:
@@ -218,7 +222,8 @@ def joint_step(row: Any, s: Any, drive: float, load: float, dt: float) -> None:
     each on its own once it would pull, until the gap closes again (momentum kept)."""
     fr = (row[VISCOUS], row[COULOMB], row[STATIC])
     j_r = row[ROTOR]
-    j_load = row[ARM_INERTIA] + (row[MASS] * row[ARM] ** 2 if s[GLUED] else 0.0)  # m_s r^2
+    riding = row[MASS] * (row[ARM] * math.cos(s[QL])) ** 2 if s[GLUED] else 0.0
+    j_load = row[ARM_INERTIA] + riding  # m_s r^2 cos^2 q while the shuttle rides the tip
     w_joint, mean_joint = friction_step(s[WM], j_r + j_load, drive + load, dt, fr)
     half = row[BACKLASH] / 2
     pull = j_load * (w_joint - s[WM]) / dt - load  # what the motor would exert on the arm

@@ -121,12 +121,16 @@ class DropSimulator:
         self.k_s = np.array([t.k_s for t in trials])
         self.theta_d = np.array([t.theta_d for t in trials])
         self.q0 = np.array([rest_position(t) for t in trials])
+        # recorded heights are above the tip at rest, r sin(q0): the simulator's are above the
+        # axis (an arm resting away from horizontal puts its tip r sin(q0) higher)
+        self.tip0 = self.arm * np.sin(self.q0)
         y0, v0 = zip(*(shuttle_state(t) for t in trials), strict=True)
-        self.y0, self.v0 = np.array(y0), np.array(v0)
+        self.y0, self.v0 = np.array(y0) + self.tip0, np.array(v0)
         self.duration = max(t.end_s - t.start_s for t in trials) + 0.03
 
     def run(self, ph: DropPhysics, tiles: int = 1) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """(time from each trial's start, motor position, shuttle height), (rows, steps): the
+        """(time from each trial's start, motor position, shuttle height above the tip at
+        rest), (rows, steps): the
         trials ``tiles`` times over, row ``j * n_trials + i`` with physics row alike."""
         n = len(self.trials) * tiles
         ph = ph.rows(n)
@@ -165,4 +169,5 @@ class DropSimulator:
         out_q = np.empty((n, steps))
         out_y = np.empty((n, steps))
         impact(STEP_S, steps, np.stack(columns, axis=1).astype(float), out_q, out_y)
+        out_y -= np.tile(self.tip0, tiles)[:, None]  # as recorded: above the tip at rest
         return np.arange(steps, dtype=float) * STEP_S, out_q, out_y
