@@ -21,7 +21,7 @@ from transparency_ros.analysis.discrepancy.drop import (
 from transparency_ros.bag.reader import find_bags
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-import independent_rig  # noqa: E402
+import independent_rig
 
 
 def test_a_rig_that_is_not_ours_nothing_hidden_only_the_weight_is_named(tmp_path: Path) -> None:
