@@ -219,7 +219,7 @@ def simulate(rig: Rig, heights: np.ndarray, restitution: float | None) -> dict[s
         drive = np.clip(rig.k_s * (rig.theta_d - phi), -rig.peak_torque, rig.peak_torque)
         hump = (rig.static - rig.coulomb) * np.exp(-((w_m / rig.stribeck_w) ** 2))
         friction = (rig.coulomb + hump) * np.tanh(w_m / rig.eps_w) + rig.viscous * w_m
-        rail = rig.rail_n * np.tanh(v / 0.01)
+        rail = rig.rail_n * np.tanh(v / 0.001)  # Coulomb, smoothed over 1 mm/s
         a_y = -G + (force - rail) / rig.mass_kg
         if two_body:
             gap = rig.backlash_rad / 2
