@@ -32,6 +32,7 @@ from transparency_ros.bag.reader import (
     scalar_series,
     stamp_ns,
 )
+from transparency_ros.core import stamps
 from transparency_ros.core.config import load_drop_test
 from transparency_ros.core.estimator import (
     DetectorSettings,
@@ -41,7 +42,6 @@ from transparency_ros.core.estimator import (
     SchmittDetector,
 )
 
-NS_PER_S = 1_000_000_000
 CUSTOM_KEYS = (
     "transparency.actuator",
     "transparency.k_s",
@@ -156,7 +156,7 @@ def evaluate_trial(path: str | Path, fit_window_s: float = 0.015) -> TrialMetric
         if onset is None:
             onset = offline_onset(bag, k_s, threshold)
             source = "offline estimator" if onset is not None else "none"
-    t_t = t_t_ns / NS_PER_S
+    t_t = t_t_ns / stamps.NS_PER_S
     base = TrialMetrics(str(path), actuator, height, mass, t_t, energy, v_t, False, source,
                         None, None, None, None, None, t_t_ns)  # fmt: skip
     if onset is None:

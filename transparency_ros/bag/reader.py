@@ -36,6 +36,7 @@ from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_
 
 from transparency_ros.bag.errors import BagReadError
 from transparency_ros.bag.fast import FieldArrays, read_fields
+from transparency_ros.core import stamps
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
 
@@ -286,18 +287,9 @@ def find_bags(paths: Sequence[str | Path]) -> list[Path]:
 # --------------------------------------------------------------------- arrays
 
 
-NS_PER_S = 1_000_000_000
-
-
 def stamp_ns(header: Any) -> int:
     """A header's stamp as integer nanoseconds (exact)."""
-    return int(header.stamp.sec) * NS_PER_S + int(header.stamp.nanosec)
-
-
-def stamp_s(header: Any) -> float:
-    """A header's stamp as float seconds (about 240 ns resolution at today's epoch: for
-    display; compare stamps with :func:`stamp_ns`)."""
-    return float(header.stamp.sec) + float(header.stamp.nanosec) * 1e-9
+    return stamps.join(header.stamp.sec, header.stamp.nanosec)
 
 
 class _Stamped:
@@ -340,7 +332,7 @@ def _fields(bag: BagSource, topic: str) -> FieldArrays | None:
 
 def _stamps(fields: FieldArrays) -> np.ndarray:
     sec, nanosec = fields.fields["header.stamp.sec"], fields.fields["header.stamp.nanosec"]
-    return sec.astype(np.int64) * NS_PER_S + nanosec.astype(np.int64)  # as stamp_ns()
+    return sec.astype(np.int64) * stamps.NS_PER_S + nanosec.astype(np.int64)  # as stamp_ns()
 
 
 def _fast_joint_series(bag: BagSource, topic: str, joint: str | None) -> JointSeries | None:

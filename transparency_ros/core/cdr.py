@@ -21,6 +21,7 @@ from __future__ import annotations
 import struct
 from typing import NamedTuple
 
+from transparency_ros.core import stamps
 from transparency_ros.core.errors import TransparencyError
 
 LITTLE_ENDIAN_CDR = b"\x00\x01\x00\x00"
@@ -43,7 +44,7 @@ class JointStateFields(NamedTuple):
 
     @property
     def stamp_ns(self) -> int:
-        return self.sec * 1_000_000_000 + self.nanosec
+        return stamps.join(self.sec, self.nanosec)
 
     @property
     def stamp_s(self) -> float:
@@ -56,7 +57,7 @@ def header_stamp_ns(data: bytes) -> int:
     if len(data) < 12 or data[:4] != LITTLE_ENDIAN_CDR:
         raise CdrError("not a little-endian CDR message with a header")
     sec, nanosec = _STAMP.unpack_from(data, 4)
-    return int(sec) * 1_000_000_000 + int(nanosec)
+    return stamps.join(sec, nanosec)
 
 
 def write_header_stamp(buffer: bytearray, sec: int, nanosec: int) -> None:

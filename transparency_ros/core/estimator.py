@@ -28,6 +28,7 @@ from enum import Enum
 import numpy as np
 import numpy.typing as npt
 
+from transparency_ros.core import stamps
 from transparency_ros.core.errors import TransparencyError
 
 
@@ -86,12 +87,6 @@ def estimate_torque(
 def _ns(seconds: float) -> int:
     """A duration setting [s] as integer nanoseconds, to compare with stamp differences."""
     return round(seconds * 1e9)
-
-
-def _text(stamp_ns: int) -> str:
-    """A stamp as exact seconds text (sec.nanosec)."""
-    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-    return f"{sec}.{nanosec:09d}"
 
 
 class ContactLevel(int, Enum):
@@ -400,7 +395,8 @@ class EstimatorPipeline:
             last = self._last_stamp.get(name)
             if last is not None and stamp_ns <= last:
                 raise self.reject(
-                    "stamp_not_increasing", f"{name}: {_text(stamp_ns)} after {_text(last)}"
+                    "stamp_not_increasing",
+                    f"{name}: {stamps.text(stamp_ns)} after {stamps.text(last)}",
                 )
         estimates: list[JointEstimate] = []
         for i, name in enumerate(names):

@@ -44,6 +44,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt8
 from std_srvs.srv import Trigger
 
+from transparency_ros.core import stamps
 from transparency_ros.core.cdr import (
     CdrError,
     JointStateFields,
@@ -329,7 +330,7 @@ class ContactEstimatorNode(Node):
         if pub is not None:
             arm = self.values["arm_length_m"]
             force = event.torque_nm / arm if arm > 0 else 0.0
-            sec, nanosec = divmod(event.stamp_ns, 1_000_000_000)  # exact: the sample's own stamp
+            sec, nanosec = stamps.split(event.stamp_ns)  # exact: the sample's own stamp
             data = encode_wrench_stamped(
                 sec,
                 nanosec,

@@ -8,31 +8,25 @@ float64 resolves about 240 ns, so a stamp rounded through it no longer matches i
 
 from __future__ import annotations
 
-import math
-
 from builtin_interfaces.msg import Time
 
-NS_PER_S = 1_000_000_000
+from transparency_ros.core import stamps
+from transparency_ros.core.stamps import from_seconds as s_to_ns
+
+__all__ = ["ns_to_stamp", "s_to_ns", "stamp_to_ns", "stamp_to_s"]
 
 
 def stamp_to_ns(stamp: Time) -> int:
     """A header stamp as integer nanoseconds (exact)."""
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+    return stamps.join(stamp.sec, stamp.nanosec)
 
 
 def ns_to_stamp(stamp_ns: int) -> Time:
     """Integer nanoseconds as a header stamp (exact; negative stamps borrow from sec)."""
-    sec, nanosec = divmod(int(stamp_ns), NS_PER_S)
+    sec, nanosec = stamps.split(stamp_ns)
     return Time(sec=sec, nanosec=nanosec)
 
 
 def stamp_to_s(stamp: Time) -> float:
     """A header stamp as seconds (float: for durations and display, not for matching stamps)."""
     return float(stamp.sec) + float(stamp.nanosec) * 1e-9
-
-
-def s_to_ns(seconds: float) -> int:
-    """Where a stamp is made from a clock that reads float seconds (python-can's bus time):
-    whole seconds kept exact, the fraction rounded to the nanosecond."""
-    sec = math.floor(seconds)
-    return int(sec) * NS_PER_S + round((seconds - sec) * 1e9)

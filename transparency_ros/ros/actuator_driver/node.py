@@ -41,6 +41,7 @@ from transparency_ros.canbus.protocol import (
     MoteusProtocol,
 )
 from transparency_ros.canbus.sim_device import SimulatedActuator
+from transparency_ros.core import stamps
 from transparency_ros.core.cdr import encode_joint_state
 from transparency_ros.core.driver import (
     CommandRejectedError,
@@ -60,7 +61,7 @@ from transparency_ros.ros.actuator_driver.parameters import (
     RUNTIME,
     settings_value,
 )
-from transparency_ros.ros.conversions import s_to_ns, stamp_to_s
+from transparency_ros.ros.conversions import stamp_to_s
 from transparency_ros.ros.params import choice_error, declare, parse_node_cli
 from transparency_ros.ros.sim_ball import SimBallInterface
 from transparency_ros.ros.sim_rig import SimRigInterface
@@ -276,7 +277,7 @@ class ActuatorDriverNode(LifecycleNode):
         if pub is None:
             return
         # when the reply was on the bus (see canbus.loop), not when read or published
-        sec, nanosec = divmod(s_to_ns(self._ros_seconds_at(sampled_s)), 1_000_000_000)
+        sec, nanosec = stamps.split(stamps.from_seconds(self._ros_seconds_at(sampled_s)))
         data = encode_joint_state(
             sec,
             nanosec,
