@@ -24,6 +24,7 @@ import math
 import operator
 from dataclasses import dataclass, field, replace
 from enum import Enum
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -84,11 +85,6 @@ def estimate_torque(
     )
 
 
-def _ns(seconds: float) -> int:
-    """A duration setting [s] as integer nanoseconds, to compare with stamp differences."""
-    return round(seconds * 1e9)
-
-
 class ContactLevel(int, Enum):
     NONE = 0
     CONTACT = 1
@@ -139,6 +135,20 @@ class DetectorSettings:
         if problems:
             raise EstimatorError("; ".join(problems))
         return self
+
+    @property
+    def onset_dwell_ns(self) -> int:
+        """The onset dwell in integer nanoseconds, to compare with stamp differences (computed
+        once per settings, not per sample)."""
+        return self._dwell_ns[0]
+
+    @property
+    def release_dwell_ns(self) -> int:
+        return self._dwell_ns[1]
+
+    @cached_property
+    def _dwell_ns(self) -> tuple[int, int]:
+        return round(self.onset_dwell_s * 1e9), round(self.release_dwell_s * 1e9)
 
     def onset_level(self, level: ContactLevel) -> float:
         return self.collision_onset if level is ContactLevel.COLLISION else self.contact_onset
@@ -226,7 +236,7 @@ class SchmittDetector:
                 first = st.pending_up[1] if st.pending_up is not None else stamp_ns
                 st.pending_up = (target, first)
             up_target, first = st.pending_up
-            if stamp_ns - first >= _ns(s.onset_dwell_s):
+            if stamp_ns - first >= s.onset_dwell_ns:
                 for lvl in range(st.level + 1, up_target + 1):
                     new = ContactLevel(lvl)
                     kind = (
@@ -244,7 +254,7 @@ class SchmittDetector:
         if st.level is not ContactLevel.NONE and value <= s.release_level(st.level):
             if st.pending_down_since is None:
                 st.pending_down_since = stamp_ns
-            if stamp_ns - st.pending_down_since >= _ns(s.release_dwell_s):
+            if stamp_ns - st.pending_down_since >= s.release_dwell_ns:
                 below = ContactLevel(st.level - 1)
                 # drop straight to NONE when also below the contact release level
                 if below is ContactLevel.CONTACT and value <= s.contact_release:
