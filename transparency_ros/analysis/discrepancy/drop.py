@@ -174,6 +174,10 @@ class DropProblem:
             "heldout": [t.name for t in self.held_trials],
         }
         self.notes = conventions(trials)
+        # what the recordings predict (see expected): the torque that held the arm off theta_d
+        # before contact, and the shuttle's weight on the arm
+        self._held_nm = -float(np.median([t.k_s * (t.theta_d - rest_position(t)) for t in trials]))
+        self._weight_nm = float(np.mean([t.mass_kg * GRAVITY * t.arm_m for t in trials]))
 
     def physics(
         self, effects: Sequence[DropEffect], params: Sequence[FloatArray], n: int
@@ -195,10 +199,8 @@ class DropProblem:
         weight on the arm (m_s g r from its custom_data), unless the arm was already held away
         from theta_d before contact; a constant torque offset, when it was (k_s (theta_d - rest)
         = -offset: a torque the weight, which acts only in contact, cannot explain)."""
-        trials = self.fit_trials + self.held_trials
-        held = -float(np.median([t.k_s * (t.theta_d - rest_position(t)) for t in trials]))
+        held, weight = self._held_nm, self._weight_nm
         if effect.name == "payload_gravity":
-            weight = float(np.mean([t.mass_kg * GRAVITY * t.arm_m for t in trials]))
             return abs(float(p[0]) - weight) <= 0.3 * weight and abs(held) < 0.3 * weight
         if effect.name == "torque_offset":
             return abs(float(p[0]) - held) <= 0.3 * abs(float(p[0]))

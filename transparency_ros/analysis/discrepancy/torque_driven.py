@@ -63,6 +63,17 @@ def window_phases(w: Windows) -> dict[str, FloatArray]:
     }
 
 
+def _velocity_sensitivity(w: Windows) -> tuple[FloatArray, FloatArray]:
+    """A free inertia's position sensitivity to its initial velocity in each window, t - t0,
+    and its squared norm per window: fixed for a set of windows, so made once and kept."""
+    if "velocity_sensitivity" not in w.extra:
+        sensitivity = w.t - w.t[:, :1]
+        weight = np.maximum(np.sum(sensitivity * sensitivity, axis=1), 1e-300)
+        w.extra["velocity_sensitivity"] = (sensitivity, weight)
+    cached: tuple[FloatArray, FloatArray] = w.extra["velocity_sensitivity"]
+    return cached
+
+
 class TorqueDrivenProblem:
     """1-DoF torque-driven recordings, simulated in windows of ``window_s`` (multiple shooting)."""
 
@@ -109,10 +120,8 @@ class TorqueDrivenProblem:
         out = simulate(self.model, effects, params, w)
         if not self.fit_initial_velocity:
             return out
-        sensitivity = w.t - w.t[:, :1]  # of a free inertia's position to its initial velocity
-        error = out - w.q
-        weight = np.sum(sensitivity * sensitivity, axis=1)
-        change = -np.sum(sensitivity * error, axis=1) / np.maximum(weight, 1e-300)
+        sensitivity, weight = _velocity_sensitivity(w)
+        change = -np.sum(sensitivity * (out - w.q), axis=1) / weight
         return np.asarray(out + sensitivity * change[:, None], dtype=float)
 
     def error_sets(
