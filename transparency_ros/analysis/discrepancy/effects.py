@@ -102,6 +102,9 @@ class TorqueOffset(Effect):
     def torque(self, q: FloatArray, qd: FloatArray, p: FloatArray) -> float:
         return float(p[0])
 
+    def meaningful(self, p: FloatArray) -> bool:
+        return not at_bound(p, self.lower, self.upper)  # held at +-5 N m it stands in
+
 
 class Cogging(Effect):
     """tau = A sin(N q + phi), N (cycles per output revolution) picked from the residual."""
@@ -182,6 +185,12 @@ class TorqueSaturation(Effect):
     def input(self, tau: FloatArray, p: FloatArray, w: Windows) -> FloatArray:
         return np.clip(tau, -p[0], p[0])
 
+    def meaningful(self, p: FloatArray) -> bool:
+        # a limit held at its lowest value removes the recorded torque altogether: on a
+        # recording whose torque explains little of the motion that fits best, and it names
+        # no saturation (an offset of 3.9 N m on the real AK80-6 run was named so)
+        return not at_bound(p, self.lower, self.upper)
+
 
 class SensorDelay(Effect):
     """Position and torque are ``delay_s`` apart (a late encoder or a late current loop): the
@@ -202,6 +211,9 @@ class SensorDelay(Effect):
         k1 = np.clip(k0 + 1, 0, full.shape[1] - 1)
         frac = np.clip(k - np.floor(k), 0.0, 1.0)
         return np.asarray(full[:, k0] * (1 - frac) + full[:, k1] * frac, dtype=float)
+
+    def meaningful(self, p: FloatArray) -> bool:
+        return not at_bound(p, (-1.0,), self.upper)  # 0 is no delay; the longest stands in
 
 
 class Quantization(Effect):
@@ -264,6 +276,15 @@ def pinned(p: FloatArray, lower: Sequence[float], upper: Sequence[float]) -> boo
     return bool(
         np.any(x >= hi - 0.01 * (hi - lo)) or np.any((lo > 0) & (x <= lo + 0.01 * (hi - lo)))
     )
+
+
+def at_bound(p: FloatArray, lower: Sequence[float], upper: Sequence[float]) -> bool:
+    """Whether a fitted value sits at a bound of its range (within 1 % of the range): the fit
+    wanted more than the effect can be, and stands in for something else."""
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    x = np.asarray(p, dtype=float)
+    margin = 0.01 * (hi - lo)
+    return bool(np.any(x <= lo + margin) or np.any(x >= hi - margin))
 
 
 def library() -> list[Effect]:

@@ -83,6 +83,8 @@ def split_trials(
     every = max(2, round(1 / heldout_fraction))
     held = [tr for i, tr in enumerate(trials) if i % every == every - 1]
     fit = [tr for i, tr in enumerate(trials) if i % every != every - 1]
+    if not held:  # two trials: the second is held out
+        fit, held = list(trials[:-1]), [trials[-1]]
     return fit, held
 
 
