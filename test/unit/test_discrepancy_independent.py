@@ -54,3 +54,19 @@ def labels_weight(trials: list) -> float:  # type: ignore[type-arg]
     """m_s g r of the bags' own custom_data, what the weight on the arm should come out as."""
     t = trials[0]
     return float(t.mass_kg * 9.81 * t.arm_m)
+
+
+def test_a_coarse_encoder_on_a_rig_that_is_not_ours_is_named_with_its_step(
+    tmp_path: Path,
+) -> None:
+    """Seed 303: a U10DD with a 2048-count encoder. Its fall is braked by the rig's own rail
+    (0.03 % of g, below what may be local gravity): compared with the tool's g, that left
+    0.8 mrad in a fall, and the quantization, which explains the encoder's error almost
+    entirely (0.91 -> 0.06 mrad), removed too little of the whole to be named."""
+    out = independent_rig.write_campaign(tmp_path / "c", 303)
+    labels = json.loads((out / "labels.json").read_text())
+    step = labels["hidden"]["quantization"]["step_rad"]
+    trials = [load_drop_trial(b) for b in find_bags([str(out / "bags")])]
+    report = Discoverer(DropProblem(trials, load_drop_nominal(None, trials))).run()
+    assert [f.effect for f in report.findings] == ["payload_gravity", "quantization"]
+    assert report.findings[1].parameters["step_rad"] == pytest.approx(step, rel=0.01)
