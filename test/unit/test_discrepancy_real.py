@@ -85,3 +85,18 @@ def test_two_trials_fit_one_and_hold_out_the_other() -> None:
     trials = [Trial("a", t, q, qd, tau), Trial("b", t, q, qd, tau)]
     problem = TorqueDrivenProblem(model, trials)
     assert problem.split == {"fit": ["a"], "heldout": ["b"]}
+
+
+def test_a_recorded_torque_that_explains_little_is_said_in_terms_a_user_can_act_on() -> None:
+    model, trial = energy_shaping()
+    report = discover(model, [trial])
+    note = next(n for n in report.notes if n.startswith("the recorded torque moves"))
+    assert "1.2 mrad, less than the model misses them (7 mrad)" in note
+    assert "Check that the torque column is the torque applied at the joint" in note
+    # where the torque drives the motion, no such note, even with a model that is off
+    t = np.arange(0.0, 6.0, 0.002)
+    q, qd, tau, free = free_inertia(t)
+    wrong = NominalModel(inertia_kgm2=1.3 * free.inertia_kgm2)
+    problem = TorqueDrivenProblem(wrong, [Trial("free", t, q, qd, tau)])
+    assert float(np.sqrt(np.mean(problem.error([], [], True) ** 2))) > 3 * problem.noise_floor()
+    assert problem.notes == []
