@@ -37,6 +37,8 @@ def test_a_fit_held_at_a_bound_of_its_range_names_nothing() -> None:
     assert not saturation.meaningful(np.array([0.01]))  # no torque at all is no saturation
     assert delay.meaningful(np.array([0.0]))  # no delay at all is plausible
     assert delay.meaningful(np.array([0.02]))
+    assert delay.meaningful(np.array([0.045]))
+    assert not delay.meaningful(np.array([0.0499]))
     assert not delay.meaningful(np.array([0.05]))
 
 

@@ -48,12 +48,11 @@ from transparency_ros.analysis.discrepancy.fitting import (
     rmse,
 )
 from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel, Trial
-from transparency_ros.analysis.discrepancy.problem import Problem
+from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
 from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem
 from transparency_ros.core.errors import ModelError
 
 PAIR_FINALISTS = 3  # pairs refitted with the effects found before them
-SIGNIFICANT = 1.5  # a held-out error within 1.5x the noise floor has nothing left to explain
 EXPECTED_MARGIN = 1.10  # an effect the recording predicts is preferred this close to the best
 
 

@@ -213,7 +213,8 @@ class SensorDelay(Effect):
         return np.asarray(full[:, k0] * (1 - frac) + full[:, k1] * frac, dtype=float)
 
     def meaningful(self, p: FloatArray) -> bool:
-        return not at_bound(p, (-1.0,), self.upper)  # 0 is no delay; the longest stands in
+        # 0 is no delay, plausible; the longest the tool tries stands in for something else
+        return not at_bound(p, self.lower, self.upper, lower_too=False)
 
 
 class Quantization(Effect):
@@ -278,13 +279,16 @@ def pinned(p: FloatArray, lower: Sequence[float], upper: Sequence[float]) -> boo
     )
 
 
-def at_bound(p: FloatArray, lower: Sequence[float], upper: Sequence[float]) -> bool:
+def at_bound(
+    p: FloatArray, lower: Sequence[float], upper: Sequence[float], *, lower_too: bool = True
+) -> bool:
     """Whether a fitted value sits at a bound of its range (within 1 % of the range): the fit
-    wanted more than the effect can be, and stands in for something else."""
+    wanted more than the effect can be, and stands in for something else. ``lower_too``
+    False: only the upper bound counts (a lower bound of 0 meaning "none" is plausible)."""
     lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
     x = np.asarray(p, dtype=float)
     margin = 0.01 * (hi - lo)
-    return bool(np.any(x <= lo + margin) or np.any(x >= hi - margin))
+    return bool(np.any(x >= hi - margin) or (lower_too and np.any(x <= lo + margin)))
 
 
 def library() -> list[Effect]:

@@ -14,6 +14,8 @@ import numpy.typing as npt
 
 from transparency_ros.analysis.discrepancy.model import FloatArray, Trial
 
+SIGNIFICANT = 1.5  # a held-out error within 1.5x the noise floor has nothing left to explain
+
 
 class Problem(Protocol):
     """What the loop needs from a kind of recording (torque-driven windows, drop tests)."""

@@ -37,6 +37,7 @@ from transparency_ros.analysis.discrepancy.model import (
     simulate,
 )
 from transparency_ros.analysis.discrepancy.problem import (
+    SIGNIFICANT,
     Trace,
     position_noise,
     spectrum_peak,
@@ -119,7 +120,7 @@ class TorqueDrivenProblem:
         )
         influence = float(np.sqrt(np.mean((with_torque - without) ** 2)))
         missed = float(np.sqrt(np.mean((with_torque - w.q) ** 2)))
-        if influence >= missed or missed <= 1.5 * self.noise_floor():
+        if influence >= missed or missed <= SIGNIFICANT * self.noise_floor():
             return []
         return [
             f"the recorded torque moves the model's {window_s:g} s predictions by "
