@@ -76,6 +76,21 @@ def _velocity_sensitivity(w: Windows) -> tuple[FloatArray, FloatArray]:
     return cached
 
 
+def _gap_note(trials: Sequence[Trial]) -> list[str]:
+    """A note on samples the recording dropped (steps over 1.5x the median), which the
+    simulation integrates over as recorded."""
+    steps = [np.diff(tr.t) for tr in trials]
+    median = float(np.median(np.concatenate(steps)))
+    gaps = sum(int(np.sum(s > 1.5 * median)) for s in steps)
+    if gaps == 0:
+        return []
+    longest = max(float(np.max(s)) for s in steps)
+    return [
+        f"{gaps} gaps in the sample times (median step {1e3 * median:.3g} ms, longest "
+        f"{1e3 * longest:.3g} ms): simulated over the recorded times"
+    ]
+
+
 class TorqueDrivenProblem:
     """1-DoF torque-driven recordings, simulated in windows of ``window_s`` (multiple shooting)."""
 
@@ -100,7 +115,7 @@ class TorqueDrivenProblem:
             "fit": [t.name for t in self.fit_trials],
             "heldout": [t.name for t in self.held_trials],
         }
-        self.notes = self._torque_note(window_s)
+        self.notes = _gap_note(trials) + self._torque_note(window_s)
 
     def _torque_note(self, window_s: float) -> list[str]:
         """A note when the recorded torque moves the model's predictions less than the model
