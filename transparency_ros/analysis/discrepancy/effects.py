@@ -103,7 +103,8 @@ class TorqueOffset(Effect):
         return float(p[0])
 
     def meaningful(self, p: FloatArray) -> bool:
-        return not at_bound(p, self.lower, self.upper)  # held at +-5 N m it stands in
+        # held at +-5 N m it stands in (the range is symmetric: its size as a magnitude)
+        return not pinned(np.abs(p), self.lower, self.upper)
 
 
 class Cogging(Effect):
@@ -189,7 +190,7 @@ class TorqueSaturation(Effect):
         # a limit held at its lowest value removes the recorded torque altogether: on a
         # recording whose torque explains little of the motion that fits best, and it names
         # no saturation (an offset of 3.9 N m on the real AK80-6 run was named so)
-        return not at_bound(p, self.lower, self.upper)
+        return not pinned(p, self.lower, self.upper)
 
 
 class SensorDelay(Effect):
@@ -214,7 +215,7 @@ class SensorDelay(Effect):
 
     def meaningful(self, p: FloatArray) -> bool:
         # 0 is no delay, plausible; the longest the tool tries stands in for something else
-        return not at_bound(p, self.lower, self.upper, lower_too=False)
+        return not pinned(p, self.lower, self.upper)
 
 
 class Quantization(Effect):
@@ -277,18 +278,6 @@ def pinned(p: FloatArray, lower: Sequence[float], upper: Sequence[float]) -> boo
     return bool(
         np.any(x >= hi - 0.01 * (hi - lo)) or np.any((lo > 0) & (x <= lo + 0.01 * (hi - lo)))
     )
-
-
-def at_bound(
-    p: FloatArray, lower: Sequence[float], upper: Sequence[float], *, lower_too: bool = True
-) -> bool:
-    """Whether a fitted value sits at a bound of its range (within 1 % of the range): the fit
-    wanted more than the effect can be, and stands in for something else. ``lower_too``
-    False: only the upper bound counts (a lower bound of 0 meaning "none" is plausible)."""
-    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
-    x = np.asarray(p, dtype=float)
-    margin = 0.01 * (hi - lo)
-    return bool(np.any(x >= hi - margin) or (lower_too and np.any(x <= lo + margin)))
 
 
 def library() -> list[Effect]:
