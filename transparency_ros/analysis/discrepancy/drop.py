@@ -75,22 +75,35 @@ class _Set:
         self.trials = list(trials)
         self.sim = DropSimulator(trials)
         self.fall: list[tuple[FloatArray, FloatArray]] = []  # (t since release, height)
-        # a recording without its release: the fall's start (height, time) is fitted for each
-        # acceleration tried (a projection onto [1, t]); only the fall's curvature is compared
-        self.fall_projection: list[FloatArray | None] = []
+        # the fall's error is linear in its acceleration a: c + a k [rad at the arm's length],
+        # both fixed per trial and made once here. A recording without its release has the
+        # fall's start (height, time) fitted for each acceleration (a projection P onto
+        # [1, t]): only the fall's curvature is compared, c = (P h - h) / r,
+        # k = (P t^2/2 - t^2/2) / r; with the release, c = (h_held - h) / r, k = -t^2/2 / r
+        self.fall_terms: list[tuple[FloatArray, FloatArray]] = []
         self.q: list[tuple[FloatArray, FloatArray]] = []  # (t since piece start, q)
         self.h: list[tuple[FloatArray, FloatArray]] = []  # (t since piece start, height)
         for t in trials:
             fall = (t.t_h > t.release_s) & (t.t_h < t.start_s)
-            self.fall.append((t.t_h[fall][::10] - t.release_s, t.height[fall][::10]))
-            basis = np.stack([np.ones_like(self.fall[-1][0]), self.fall[-1][0]], axis=1)
-            self.fall_projection.append(
-                None if t.release_recorded else basis @ np.linalg.pinv(basis)
-            )
+            t_f, h_f = t.t_h[fall][::10] - t.release_s, t.height[fall][::10]
+            self.fall.append((t_f, h_f))
+            half = 0.5 * t_f**2
+            if t.release_recorded:
+                self.fall_terms.append(((t.held_height_m - h_f) / t.arm_m, -half / t.arm_m))
+            else:
+                basis = np.stack([np.ones_like(t_f), t_f], axis=1)
+                projection = basis @ np.linalg.pinv(basis)
+                self.fall_terms.append(
+                    ((projection @ h_f - h_f) / t.arm_m, (projection @ half - half) / t.arm_m)
+                )
             sel = (t.t_q >= t.start_s) & (t.t_q <= t.end_s)
             self.q.append((t.t_q[sel] - t.start_s, t.q[sel]))
             sel = (t.t_h >= t.start_s) & (t.t_h <= t.end_s)
             self.h.append((t.t_h[sel][::10] - t.start_s, t.height[sel][::10]))
+        # d fall error / d gamma (local gravity g (1 + gamma), see _falls), all trials
+        slope = np.concatenate([GRAVITY * k for _, k in self.fall_terms]) if trials else None
+        self._gravity_slope = slope
+        self._gravity_norm = float(slope @ slope) if slope is not None else 0.0
 
     def error(self, ph: DropPhysics) -> FloatArray:
         return self.error_many([ph])[0]
@@ -131,27 +144,17 @@ class _Set:
         fitted within that spread for all trials together (on the independent rig, a 0.03 %
         mismatch left 0.8 mrad in a fall and hid a coarse encoder). With rail friction the
         acceleration is what it measures, and g is the tool's."""
-        residual, slope = [], []
-        for i, trial in enumerate(self.trials):
-            t_f, h_f = self.fall[i]
-            a = GRAVITY - float(rail_n[i]) / trial.mass_kg
-            projection = self.fall_projection[i]
-            half = 0.5 * t_f**2
-            if projection is None:
-                residual.append((trial.held_height_m - a * half - h_f) / trial.arm_m)
-                slope.append(-GRAVITY * half / trial.arm_m)  # d residual / d gamma
-            else:  # h + a t^2 / 2 is linear in t when the model is right
-                y = h_f + a * half
-                residual.append((projection @ y - y) / trial.arm_m)
-                slope.append(GRAVITY * (projection @ half - half) / trial.arm_m)
-        if np.any(rail_n != 0.0) or not residual:
+        residual = [
+            c + (GRAVITY - float(rail_n[i]) / trial.mass_kg) * k
+            for i, (trial, (c, k)) in enumerate(zip(self.trials, self.fall_terms, strict=True))
+        ]
+        if np.any(rail_n != 0.0) or self._gravity_slope is None or self._gravity_norm <= 0.0:
             return residual
-        e, d = np.concatenate(residual), np.concatenate(slope)
-        norm = float(d @ d)
-        if norm <= 0.0:
-            return residual
-        gamma = float(np.clip(-(e @ d) / norm, -LOCAL_GRAVITY_SPREAD, LOCAL_GRAVITY_SPREAD))
-        return [r + gamma * g for r, g in zip(residual, slope, strict=True)]
+        slope = self._gravity_slope
+        gamma = -float(np.concatenate(residual) @ slope) / self._gravity_norm
+        gamma = float(np.clip(gamma, -LOCAL_GRAVITY_SPREAD, LOCAL_GRAVITY_SPREAD))
+        terms = self.fall_terms
+        return [r + gamma * GRAVITY * k for r, (_, k) in zip(residual, terms, strict=True)]
 
     def layout(self) -> list[tuple[int, str, FloatArray]]:
         """(trial, piece, absolute times) in the order :meth:`error` concatenates them."""
