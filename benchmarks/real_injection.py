@@ -75,7 +75,7 @@ from transparency_ros.analysis.discrepancy.model import (
     make_windows,
     smooth_derivatives,
 )
-from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem
+from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem, predict
 
 SHARED = Path(__file__).resolve().parents[2] / "shared/external"
 PENDULUM = "actuator_data/simple_pendulum_ak80_6"
@@ -222,9 +222,8 @@ def conceal(
 def predictions(model: NominalModel, trials: list[Trial]) -> tuple[FloatArray, FloatArray]:
     """The nominal model's 0.1 s predictions of every window of ``trials`` (as the tool makes
     them) and the recorded positions."""
-    problem = TorqueDrivenProblem(model, trials)
     w = make_windows(trials, 0.1, stride_s=0.1)
-    return problem.predict([], [], w), w.q
+    return predict(model, [], [], w), w.q
 
 
 def signature(model: NominalModel, original: list[Trial], concealed: list[Trial]) -> float:

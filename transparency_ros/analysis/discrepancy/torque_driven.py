@@ -91,6 +91,24 @@ def _gap_note(trials: Sequence[Trial]) -> list[str]:
     ]
 
 
+def predict(
+    model: NominalModel,
+    effects: Sequence[Effect],
+    params: Sequence[FloatArray],
+    w: Windows,
+    fit_initial_velocity: bool = True,
+) -> FloatArray:
+    """The measured position ``model`` predicts in every window, (windows, steps), each
+    window's initial velocity fitted (see the module's docstring) unless
+    ``fit_initial_velocity`` is off."""
+    out = simulate(model, effects, params, w)
+    if not fit_initial_velocity:
+        return out
+    sensitivity, weight = _velocity_sensitivity(w)
+    change = -np.sum(sensitivity * (out - w.q), axis=1) / weight
+    return np.asarray(out + sensitivity * change[:, None], dtype=float)
+
+
 class TorqueDrivenProblem:
     """1-DoF torque-driven recordings, simulated in windows of ``window_s`` (multiple shooting)."""
 
@@ -160,15 +178,8 @@ class TorqueDrivenProblem:
     def predict(
         self, effects: Sequence[Effect], params: Sequence[FloatArray], w: Windows
     ) -> FloatArray:
-        """The measured position the model predicts in every window, (windows, steps), each
-        window's initial velocity fitted (see the module's docstring) unless
-        ``fit_initial_velocity`` is off."""
-        out = simulate(self.model, effects, params, w)
-        if not self.fit_initial_velocity:
-            return out
-        sensitivity, weight = _velocity_sensitivity(w)
-        change = -np.sum(sensitivity * (out - w.q), axis=1) / weight
-        return np.asarray(out + sensitivity * change[:, None], dtype=float)
+        """:func:`predict` with this problem's model."""
+        return predict(self.model, effects, params, w, self.fit_initial_velocity)
 
     def error_sets(
         self, effects: Sequence[Effect], param_sets: Sequence[Sequence[FloatArray]], held: bool
