@@ -56,14 +56,20 @@ def labels_weight(trials: list) -> float:  # type: ignore[type-arg]
     return float(t.mass_kg * 9.81 * t.arm_m)
 
 
+@pytest.mark.parametrize("seed", [303, 301])
 def test_a_coarse_encoder_on_a_rig_that_is_not_ours_is_named_with_its_step(
-    tmp_path: Path,
+    tmp_path: Path, seed: int
 ) -> None:
     """Seed 303: a U10DD with a 2048-count encoder. Its fall is braked by the rig's own rail
     (0.03 % of g, below what may be local gravity): compared with the tool's g, that left
     0.8 mrad in a fall, and the quantization, which explains the encoder's error almost
-    entirely (0.91 -> 0.06 mrad), removed too little of the whole to be named."""
-    out = independent_rig.write_campaign(tmp_path / "c", 303)
+    entirely (0.91 -> 0.06 mrad), removed too little of the whole to be named.
+    Seed 301: a U10GB with a 2048-count encoder and a soft impedance (k_s 2 N m/rad against
+    0.25-0.28 N m of friction with a Stribeck hump): the heights keep 0.29 mrad of the arm's
+    settling that the tool's Coulomb friction misses and the 3 mrad lattice hides from the
+    encoder. The lattice explains the encoder's error (1.0 -> 0.15 mrad) but only 66 % of the
+    whole: it is judged on the encoder, the only sensor it acts on."""
+    out = independent_rig.write_campaign(tmp_path / "c", seed)
     labels = json.loads((out / "labels.json").read_text())
     step = labels["hidden"]["quantization"]["step_rad"]
     trials = [load_drop_trial(b) for b in find_bags([str(out / "bags")])]

@@ -10,7 +10,8 @@ round fits every remaining candidate effect (its own parameters, bounded least s
 simulation error of the fitting trials; then all parameters found so far together with it),
 scores it on the held-out trials, and keeps the best only if it removes at least
 ``min_improvement`` of the held-out error above the noise floor (what sensor noise alone would
-cause), at least a tenth of the floor in absolute terms, the held-out information criterion
+cause; for an effect of one sensor's readings, of that sensor's error above its own floor), at
+least a tenth of the floor in absolute terms, the held-out information criterion
 (n log(RSS/n) + 2k) improves by more than 10, and its fit is meaningful. When no single
 candidate passes and structure is left, candidates are fitted two at a time (two missing
 effects may each explain too little alone). A kept effect gets its parameters with 95 %
@@ -195,12 +196,23 @@ class Discoverer:
             err=err,
             rmse=err_rmse,
             aic=aic(err, size),
-            gain=(base.rmse - err_rmse) / max(base.rmse - base.floor, 1e-12),
+            gain=self._gain(added, base, err),
             result=result,
             meaningful=all(
                 a.meaningful(p) for a, p in zip(added, params[len(effects) :], strict=True)
             ),
         )
+
+    def _gain(self, added: list[Any], base: _Base, err: FloatArray) -> float:
+        """The share of the held-out error above the noise floor that ``added`` removes; for
+        effects of one sensor's readings (``sensor_scope`` of the problem), of that sensor's
+        error above its own floor."""
+        scope = getattr(self.problem, "sensor_scope", lambda _a: None)(added)
+        if scope is None:
+            return (base.rmse - rmse(err)) / max(base.rmse - base.floor, 1e-12)
+        mask, floor = scope
+        before = rmse(base.err[mask])
+        return float((before - rmse(err[mask])) / max(before - floor, 1e-12))
 
     def _names(self, step: _Step, base: _Base) -> bool:
         """Whether ``step`` names its effects: it removes at least ``min_improvement`` of the

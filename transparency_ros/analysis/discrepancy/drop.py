@@ -287,6 +287,13 @@ class DropProblem:
     def noise_floor(self) -> float:
         """RMS error sensor noise alone gives: encoder (quantization) and potentiometer noise,
         weighted by how many samples of each are compared."""
+        q_noise, h_noise = self._sensor_noise()
+        n_q = sum(q.size for _, q in self.fit.q)
+        n_h = sum(h.size for _, h in self.fit.h) + sum(h.size for _, h in self.fit.fall)
+        return float(math.sqrt((n_q * q_noise**2 + n_h * h_noise**2) / max(1, n_q + n_h)))
+
+    def _sensor_noise(self) -> tuple[float, float]:
+        """The encoder's and the height sensor's noise [rad at the arm's length] at rest."""
         q_noise = float(
             np.sqrt(
                 np.mean(
@@ -304,9 +311,20 @@ class DropProblem:
                 )
             )
         )
-        n_q = sum(q.size for _, q in self.fit.q)
-        n_h = sum(h.size for _, h in self.fit.h) + sum(h.size for _, h in self.fit.fall)
-        return float(math.sqrt((n_q * q_noise**2 + n_h * h_noise**2) / max(1, n_q + n_h)))
+        return q_noise, h_noise
+
+    def sensor_scope(self, effects: Sequence[DropEffect]) -> tuple[BoolArray, float] | None:
+        """For effects that all act on the encoder's readings alone (its lattice, its lateness):
+        the held-out error elements of the encoder and its noise floor, on which they are
+        judged. Such an effect cannot touch the heights' or the fall's residual; judged on
+        all of it, a coarse encoder went unnamed beside 0.3 mrad the heights kept for another
+        reason (a friction hump the encoder's 3 mrad lattice hides)."""
+        if not effects or any(e.sensor != "encoder" for e in effects):
+            return None
+        mask = np.concatenate(
+            [np.full(t.size, piece == "encoder") for _, piece, t in self.held.layout()]
+        )
+        return mask, self._sensor_noise()[0]
 
     def residual_peak_hz(
         self, effects: Sequence[DropEffect], params: Sequence[FloatArray]

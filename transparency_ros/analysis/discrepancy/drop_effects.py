@@ -27,6 +27,9 @@ class DropEffect:
     upper: tuple[float, ...]
     fittable: bool = True
     discrete_choices: int = 0
+    # an effect of one sensor's readings only (the encoder's lattice or its lateness): judged
+    # on that sensor's residual (see DropProblem.sensor_scope)
+    sensor: str | None = None
 
     def initial(self, problem: DropProblem) -> FloatArray:
         return np.array([(lo + hi) / 2 for lo, hi in zip(self.lower, self.upper, strict=True)])
@@ -71,8 +74,17 @@ class DropDrift(DropEffect):
 class SetPhysics(DropEffect):
     """An effect that sets one value of the physics to its single parameter."""
 
-    def __init__(self, name: str, param: str, lower: float, upper: float, target: str) -> None:
-        super().__init__(name, (param,), (lower,), (upper,))
+    def __init__(
+        self,
+        name: str,
+        param: str,
+        lower: float,
+        upper: float,
+        target: str,
+        *,
+        sensor: str | None = None,
+    ) -> None:
+        super().__init__(name, (param,), (lower,), (upper,), sensor=sensor)
         self.target = target
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
@@ -126,7 +138,9 @@ class StructuralCompliance(DropEffect):
 
 class DropQuantization(DropEffect):
     def __init__(self) -> None:
-        super().__init__("quantization", ("step_rad",), (1e-7,), (0.1,), fittable=False)
+        super().__init__(
+            "quantization", ("step_rad",), (1e-7,), (0.1,), fittable=False, sensor="encoder"
+        )
 
     def initial(self, problem: DropProblem) -> FloatArray:
         steps = np.concatenate([np.abs(np.diff(t.q)) for t in problem.fit_trials])
@@ -148,6 +162,6 @@ def drop_library(shuttle_mass_kg: float) -> list[DropEffect]:
         ImpactSpeedLoss(shuttle_mass_kg),
         StructuralCompliance(),
         SetPhysics("backlash", "backlash_rad", 0.0, 0.05, "backlash_rad"),
-        SetPhysics("sensor_delay", "delay_s", 0.0, 0.02, "delay_s"),
+        SetPhysics("sensor_delay", "delay_s", 0.0, 0.02, "delay_s", sensor="encoder"),
         DropQuantization(),
     ]
