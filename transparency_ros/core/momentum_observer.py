@@ -8,12 +8,25 @@ follows the external torque through a first-order lag, r' = K_o (tau_ext - r). I
 commanded (drive) torque, the velocity and an actuator model (inertia, Coulomb and viscous
 friction from Table 1); the position-error estimate of eq. (1) needs none of these, which is the
 paper's argument. Time is passed in.
+
+For a robot (:class:`RobotMomentumObserver`, De Luca's observer) the momentum is p = M(q) q' and
+
+    r(t) = K_o [ p(t) - p(0) - integral_0^t (tau - beta(q, q') - F(q') + r) ds ],
+    beta = g(q) - C(q, q')^T q',
+
+one residual per joint, each following its joint's external torque through a first-order lag.
+The model (:class:`transparency_ros.core.robot_model.RobotModel` from a URDF, or any object with
+the same ``dof``, ``momentum_terms`` and ``friction_torque``) is passed in.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+import numpy.typing as npt
 
 from transparency_ros.core.config import ActuatorParams
 from transparency_ros.core.estimator import EstimatorError
@@ -71,3 +84,80 @@ class MomentumObserver:
         self.residual_nm = self.gain_per_s * (p - self._p0 - self._integral)
         self._last = (stamp_s, velocity_rad_s, drive_torque_nm)
         return self.residual_nm
+
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class RobotDynamics(Protocol):
+    """What the observer needs of a robot model."""
+
+    @property
+    def dof(self) -> int: ...
+
+    def momentum_terms(self, q: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(M(q) v, g(q) - C(q, v)^T v)."""
+        ...
+
+    def friction_torque(self, v: FloatArray) -> FloatArray: ...
+
+
+class RobotMomentumObserver:
+    """The generalized-momentum observer of a robot's joints; time in integer nanoseconds."""
+
+    def __init__(self, model: RobotDynamics, gain_per_s: float | FloatArray) -> None:
+        gain = np.broadcast_to(np.asarray(gain_per_s, dtype=float), (model.dof,)).copy()
+        if not np.all(np.isfinite(gain) & (gain > 0)):
+            raise EstimatorError(f"momentum observer gains K_o must be > 0, got {gain.tolist()}")
+        self.model = model
+        self.gain_per_s = gain
+        self.reset()
+
+    def reset(self) -> None:
+        self._p0: FloatArray | None = None
+        self._integral = np.zeros(self.model.dof)
+        self._last: tuple[int, FloatArray] | None = None  # stamp, known rate of the momentum
+        self.residual_nm = np.zeros(self.model.dof)
+
+    def update(self, stamp_ns: int, q: FloatArray, v: FloatArray, tau_nm: FloatArray) -> FloatArray:
+        """Feed one sample (joint positions, velocities, applied torques in the model's joint
+        order); return the residual, the estimate of the external torques [N m]."""
+        n = self.model.dof
+        q, v, tau = (np.asarray(x, dtype=float) for x in (q, v, tau_nm))
+        for label, x in (("position", q), ("velocity", v), ("torque", tau)):
+            if x.shape != (n,):
+                raise EstimatorError(f"{label}: expected {n} joints, got shape {x.shape}")
+            if not np.all(np.isfinite(x)):
+                raise EstimatorError(f"{label} is not finite: {x.tolist()}")
+        p, beta = self.model.momentum_terms(q, v)
+        rate = tau - beta - self.model.friction_torque(v)
+        if self._last is None or self._p0 is None:
+            self._p0 = p
+            self._last = (stamp_ns, rate)
+            return self.residual_nm.copy()
+        last_stamp, last_rate = self._last
+        if stamp_ns <= last_stamp:
+            raise EstimatorError(f"stamps must increase (got {stamp_ns} ns after {last_stamp})")
+        dt = (stamp_ns - last_stamp) * 1e-9
+        # rectangle rule with the previous sample (causal), as for one joint
+        self._integral += (last_rate + self.residual_nm) * dt
+        self.residual_nm = self.gain_per_s * (p - self._p0 - self._integral)
+        self._last = (stamp_ns, rate)
+        return self.residual_nm.copy()
+
+    def run(
+        self,
+        stamps_ns: npt.NDArray[np.int64],
+        q: FloatArray,
+        v: FloatArray,
+        tau_nm: FloatArray,
+    ) -> FloatArray:
+        """A whole recording, (samples, joints) each, from a reset: the residuals, (samples,
+        joints), as :meth:`update` gives them one by one."""
+        self.reset()
+        return np.array(
+            [
+                self.update(int(t), qi, vi, ti)
+                for t, qi, vi, ti in zip(stamps_ns, q, v, tau_nm, strict=True)
+            ]
+        )
