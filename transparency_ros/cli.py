@@ -18,6 +18,7 @@ from transparency_ros import __version__
 from transparency_ros.commands import (
     compare,
     demo,
+    detect,
     discrepancy,
     evaluate,
     feelcage,
@@ -32,7 +33,7 @@ from transparency_ros.core.interrupts import (
     terminate_like_interrupt,
 )
 
-SUBCOMMANDS = (model, feelcage, rig, evaluate, salvage, discrepancy, compare, demo)
+SUBCOMMANDS = (model, feelcage, rig, evaluate, salvage, discrepancy, compare, detect, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -16,6 +16,7 @@ from transparency_ros.core.estimator import EstimatorError
 from transparency_ros.core.momentum_observer import RobotMomentumObserver
 from transparency_ros.core.robot_model import RobotModel, UrdfError
 from transparency_ros.synth.robots import chain_urdf as chain
+from transparency_ros.synth.robots import simulate_chain
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "external" / "double_pendulum"
 URDF = SHARED / "pendubot.urdf"
@@ -93,40 +94,6 @@ def test_a_missing_urdf_file_is_named(tmp_path: Path) -> None:
         RobotModel.from_urdf(tmp_path / "nothing.urdf")
 
 
-def simulate(
-    model: RobotModel, tau_ext: np.ndarray, dt: float = 1e-3
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The model's own motion under a PD hold plus ``tau_ext`` (samples, joints), RK4; returns
-    stamps [ns], q, v and the applied (motor) torque."""
-    n = model.dof
-    q, v = np.full(n, 0.4), np.zeros(n)
-
-    def motor(q: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
-        target = 0.4 + 0.5 * np.sin(2 * math.pi * 0.7 * t + np.arange(n))
-        return 8.0 * (target - q) - 0.5 * v
-
-    qs, vs, taus = [], [], []
-    for k in range(tau_ext.shape[0]):
-        t = k * dt
-        tau = motor(q, v, t)
-        qs.append(q.copy())
-        vs.append(v.copy())
-        taus.append(tau)
-
-        def f(x: np.ndarray, tau: np.ndarray = tau, k: int = k) -> np.ndarray:
-            return np.r_[x[n:], model.forward_dynamics(x[:n], x[n:], tau + tau_ext[k])]
-
-        x = np.r_[q, v]
-        k1 = f(x)
-        k2 = f(x + dt / 2 * k1)
-        k3 = f(x + dt / 2 * k2)
-        k4 = f(x + dt * k3)
-        x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        q, v = x[:n], x[n:]
-    stamps = (np.arange(tau_ext.shape[0]) * round(dt * 1e9)).astype(np.int64)
-    return stamps, np.array(qs), np.array(vs), np.array(taus)
-
-
 def test_the_observer_finds_an_external_torque_on_the_joint_it_acts_on() -> None:
     """A 0.3 N m push on the middle joint of a 3-link chain for 0.2 s while the chain moves:
     the residual of that joint rises to it with the observer's lag; the others stay near 0
@@ -134,7 +101,7 @@ def test_the_observer_finds_an_external_torque_on_the_joint_it_acts_on() -> None
     model = RobotModel.from_urdf(chain(3))
     tau_ext = np.zeros((2000, 3))
     tau_ext[1000:1200, 1] = 0.3
-    stamps, q, v, tau = simulate(model, tau_ext)
+    stamps, q, v, tau = simulate_chain(model, tau_ext)
     observer = RobotMomentumObserver(model, gain_per_s=50.0)
     r = observer.run(stamps, q, v, tau)
     assert np.max(np.abs(r[:1000])) < 0.01  # no push, no residual

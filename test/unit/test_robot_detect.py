@@ -1,0 +1,147 @@
+"""Contact detection on robots' recordings: the CSV reader, calibration from runs without
+contact, the detectors and their score. The machinery is checked on a simulated chain whose
+truth differs from its URDF in known ways; the figures on the real double pendulum are a
+benchmark (benchmarks/pendubot_detection.py)."""
+
+from __future__ import annotations
+
+import lzma
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from transparency_ros.analysis import robot_detect as rd
+from transparency_ros.analysis.robot_calibration import Calibration, calibrate
+from transparency_ros.analysis.robot_data import Columns, JointRecording, read_joint_csv
+from transparency_ros.core.errors import ConfigError
+from transparency_ros.core.robot_model import RobotModel
+from transparency_ros.synth.robots import chain_urdf, simulate_chain
+
+HEADER = "time,pos_meas1,pos_meas2,vel_meas1,vel_meas2,tau_con1,tau_con2,tau_pert1,tau_pert2\n"
+
+
+def write_csv(path: Path, rows: list[str]) -> Path:
+    text = HEADER + "".join(r + "\n" for r in rows)
+    if path.suffix == ".xz":
+        path.write_bytes(lzma.compress(text.encode()))
+    else:
+        path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("name", ["run.csv", "run.csv.xz"])
+def test_a_csv_is_read_per_joint_and_a_repeated_stamp_is_dropped_with_a_note(
+    tmp_path: Path, name: str
+) -> None:
+    rows = [
+        "0.000,0.1,0.2,1,2,0.5,0.6,0,0",
+        "0.002,0.3,0.4,3,4,0.7,0.8,0,0.2",
+        "0.002,9,9,9,9,9,9,9,9",  # the logger wrote the same time twice
+        "0.004,0.5,0.6,5,6,0.9,1.0,0,0",
+    ]
+    rec = read_joint_csv(write_csv(tmp_path / name, rows), ["a", "b"])
+    assert rec.joints == ("a", "b") and rec.stamps_ns.tolist() == [0, 2_000_000, 4_000_000]
+    assert rec.position[:, 1].tolist() == [0.2, 0.4, 0.6]
+    assert rec.torque[:, 0].tolist() == [0.5, 0.7, 0.9]
+    assert rec.label is not None and rec.label[:, 1].tolist() == [0, 0.2, 0]
+    assert rec.desired is None  # no pos_des columns
+    assert rec.notes == [f"{name}: 1 rows whose time does not increase dropped"]
+
+
+def test_a_bad_csv_names_the_file_the_column_and_the_row(tmp_path: Path) -> None:
+    bad = write_csv(tmp_path / "nan.csv", ["0,0,0,0,0,0,0,0,0", "0.002,0,nan,0,0,0,0,0,0"])
+    with pytest.raises(ConfigError, match=r"nan\.csv: column 'pos_meas2' is not a finite .* row 3"):
+        read_joint_csv(bad, ["a", "b"])
+    good = write_csv(tmp_path / "good.csv", ["0,0,0,0,0,0,0,0,0", "0.002,0,0,0,0,0,0,0,0"])
+    with pytest.raises(ConfigError, match=r"good\.csv: no column 'pos_meas3'"):
+        read_joint_csv(good, ["a", "b", "c"])
+    with pytest.raises(ConfigError, match="no column 'q1'"):
+        read_joint_csv(good, ["a", "b"], Columns(position="q{}"))
+
+
+def recording(label: np.ndarray, step_s: float = 0.002) -> JointRecording:
+    n = label.shape[0]
+    zeros = np.zeros((n, 2))
+    stamps = (np.arange(n) * round(step_s * 1e9)).astype(np.int64)
+    return JointRecording("r", stamps, ("a", "b"), zeros, zeros, zeros, label=label)
+
+
+def test_the_score_counts_pulses_found_false_alarms_and_the_delay_from_half_the_peak() -> None:
+    """Two triangular pulses on joint a (one found 10 ms after its half-peak, one missed), one
+    on joint b found; three onsets elsewhere within 0.2 s are one false alarm, a fourth is
+    another."""
+    label = np.zeros((2000, 2))
+    label[100:151, 0] = 0.4 * (1 - np.abs(np.arange(51) - 25) / 25)  # peak at 0.25 s
+    label[1000:1051, 0] = 0.4 * (1 - np.abs(np.arange(51) - 25) / 25)
+    label[500:551, 1] = -0.3 * (1 - np.abs(np.arange(51) - 25) / 25)
+    rec = recording(label)
+    pulses = rd.pulses(rec)
+    assert [(p.joint, round(p.peak, 2)) for p in pulses] == [(0, 0.4), (0, 0.4), (1, 0.3)]
+    half = pulses[0].half_s
+    det = rd.Detection(
+        "r",
+        ("a", "b"),
+        rec.stamps_ns * 1e-9,
+        np.zeros((2000, 2)),
+        np.ones((2000, 2)),
+        [[half + 0.010, 3.0, 3.05, 3.1, 3.5], [pulses[2].half_s + 0.020]],
+    )
+    s = rd.score([det], [rec])
+    assert (s.pulses, s.found, s.false_alarms) == (3, 2, 2)
+    assert s.delays_s == pytest.approx([0.010, 0.020])
+    assert s.missed == [f"r a at {pulses[1].half_s:.2f} s"]
+    assert s.alarms_per_minute == pytest.approx(2 / (rec.duration_s / 60))
+    only_b = rd.score([det], [rec], joint=1)
+    assert (only_b.pulses, only_b.found, only_b.false_alarms) == (1, 1, 0)
+
+
+def simulated(model: RobotModel, seconds: float, phase: float, pulses: list[tuple[int, float]]
+              ) -> JointRecording:  # fmt: skip
+    """The true chain's run at 1 kHz, the motors 4 ms late, 0.4 N m pushes of 0.3 s."""
+    n = round(seconds * 1000)
+    tau_ext = np.zeros((n, model.dof))
+    for joint, start_s in pulses:
+        tau_ext[round(start_s * 1000) : round((start_s + 0.3) * 1000), joint] = 0.4
+    stamps, q, v, command = simulate_chain(model, tau_ext, delay_steps=4, phase=phase)
+    return JointRecording(f"run{phase:g}", stamps, model.joint_names, q, v, command, label=tau_ext)
+
+
+def test_calibration_learns_the_delay_and_the_mass_the_urdf_lacks_and_then_detects() -> None:
+    """The chain is 30 % heavier than its URDF says and its motors apply the command 4 ms
+    late. Calibrated on three runs without contact, the detector finds all four pushes of a
+    fourth run with no false alarm; the URDF's model as it is, with a threshold just above
+    its largest residual without contact, finds fewer."""
+    urdf = RobotModel.from_urdf(chain_urdf(2))
+    truth = RobotModel.from_urdf(chain_urdf(2, mass=0.65))
+    clean = [simulated(truth, 5.0, phase, []) for phase in (0.0, 1.0, 2.0)]
+    cal = calibrate(urdf, clean, gain_per_s=20.0)
+    # 4 samples late, each command held for its 1 ms step: 4.5 ms in effect
+    assert cal.command_delay_s in {0.004, 0.005}
+    command_rms = np.sqrt(np.mean(np.concatenate([r.torque for r in clean]) ** 2))
+    assert cal.torque_rms_nm < 0.02 * command_rms
+    for q in ([0.3, 0.5], [1.0, -0.4]):  # the weight it learnt is the true one
+        learnt, true = cal.model(urdf).gravity(np.array(q)), truth.gravity(np.array(q))
+        assert learnt == pytest.approx(true, rel=0.02)
+        assert urdf.gravity(np.array(q)) != pytest.approx(true, rel=0.1)
+    pushed = simulated(truth, 6.0, 0.5, [(0, 1.0), (1, 2.5), (0, 4.0), (1, 5.0)])
+    s = rd.score([rd.calibrated(urdf, cal, pushed)], [pushed])
+    assert (s.found, s.pulses, s.false_alarms) == (4, 4, 0)
+    assert s.delay_s(50) < 0.1
+    thresholds = rd.constant_thresholds([rd.textbook_residual(urdf, r, 20.0) for r in clean])
+    textbook = rd.with_threshold(pushed, rd.textbook_residual(urdf, pushed, 20.0), thresholds)
+    assert rd.score([textbook], [pushed]).found < 4
+
+
+def test_a_calibration_round_trips_and_refuses_another_robot(tmp_path: Path) -> None:
+    urdf = RobotModel.from_urdf(chain_urdf(2))
+    clean = [simulated(urdf, 3.0, 0.0, [])]
+    cal = calibrate(urdf, clean, gain_per_s=20.0)
+    cal.save(tmp_path / "cal.yaml")
+    again = Calibration.load(tmp_path / "cal.yaml")
+    assert again == cal
+    with pytest.raises(ConfigError, match="a calibration from another robot"):
+        again.model(RobotModel.from_urdf(chain_urdf(3)))
+    (tmp_path / "bad.yaml").write_text("robot: x\njoints: [a]\n")
+    with pytest.raises(ConfigError, match=r"bad\.yaml: not a calibration file"):
+        Calibration.load(tmp_path / "bad.yaml")

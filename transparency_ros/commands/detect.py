@@ -1,0 +1,186 @@
+"""``transparency calibrate`` and ``transparency detect``: contact detection on a robot's
+recordings with a model from its URDF (see docs/robots.md)."""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from transparency_ros.core.errors import ConfigError
+
+METHODS = ("momentum_observer", "textbook", "position_error")
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("recordings", nargs="+", metavar="RECORDING", help="CSV files (.csv, .csv.xz)")
+    p.add_argument("--urdf", required=True, help="the robot's URDF file")
+    p.add_argument(
+        "--joints",
+        help="the URDF joints of the CSV's columns 1, 2, ... (comma-separated; default: the "
+        "URDF's movable joints in order)",
+    )
+    p.add_argument(
+        "--columns",
+        default="time=time,position=pos_meas{},velocity=vel_meas{},torque=tau_con{}",
+        help="column patterns, {} is the joint's number (default: the DFKI double pendulum's)",
+    )
+    p.add_argument("--gain", type=float, default=20.0, help="observer gain K_o [1/s]")
+
+
+def register(subparsers: Any) -> None:
+    c = subparsers.add_parser(
+        "calibrate",
+        help="learn what a robot's model misses from recordings without contact",
+        description=(
+            "Fit the command delay, the links' inertial parameters, each joint's armature, "
+            "friction and torque offset, and thresholds that grow with speed, from recordings "
+            "in which nothing touched the robot; write them as a YAML for `transparency detect "
+            "--calibration`."
+        ),
+    )
+    _common(c)
+    c.add_argument("--out", required=True, help="the calibration YAML to write")
+    c.set_defaults(func=run_calibrate)
+
+    d = subparsers.add_parser(
+        "detect",
+        help="detect contacts in a robot's recordings and score them against labels",
+        description=(
+            "Run a contact detector over recordings as the estimator node would: the "
+            "momentum observer with a calibration, the textbook observer (the URDF as it is) "
+            "or eq. (1)'s position error (thresholds from --clean recordings). With --labels, "
+            "score it per joint: pulses found, false alarms per minute, delay."
+        ),
+    )
+    _common(d)
+    d.add_argument("--method", choices=METHODS, default="momentum_observer")
+    d.add_argument("--calibration", help="calibration YAML (momentum_observer)")
+    d.add_argument(
+        "--clean",
+        nargs="+",
+        default=[],
+        metavar="RECORDING",
+        help="recordings without contact: thresholds just above their largest residual "
+        "(textbook, position_error)",
+    )
+    d.add_argument(
+        "--labels",
+        metavar="PATTERN",
+        help="column of the true external torque per joint, e.g. tau_pert{}",
+    )
+    d.add_argument("--desired", default="pos_des{}", help="desired-position column pattern")
+    d.add_argument("--report", metavar="DIR", help="write a plot per recording here")
+    d.add_argument("--json", action="store_true", help="print the score as JSON")
+    d.set_defaults(func=run_detect)
+
+
+def _columns(text: str, labels: str | None = None, desired: str | None = None) -> Any:
+    from transparency_ros.analysis.robot_data import Columns  # noqa: PLC0415
+
+    known = {"time", "position", "velocity", "torque"}
+    values: dict[str, str | None] = {}
+    for item in text.split(","):
+        key, _, value = item.partition("=")
+        if key not in known or not value:
+            raise ConfigError(f"--columns: {item!r} is not one of {sorted(known)}=PATTERN")
+        values[key] = value
+    return Columns(**values, label=labels, desired=desired)  # type: ignore[arg-type]
+
+
+def _load(args: argparse.Namespace, paths: list[str], labels: str | None = None) -> Any:
+    from transparency_ros.analysis.robot_data import read_joint_csv  # noqa: PLC0415
+    from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
+
+    model = RobotModel.from_urdf(args.urdf)
+    for note in model.notes:
+        print(f"note: {note}", file=sys.stderr)
+    joints = args.joints.split(",") if args.joints else list(model.joint_names)
+    columns = _columns(args.columns, labels, getattr(args, "desired", None))
+    files = [f for p in paths for f in (sorted(glob.glob(p)) or [p])]
+    recordings = [read_joint_csv(f, joints, columns) for f in files]
+    for rec in recordings:
+        for note in rec.notes:
+            print(f"note: {note}", file=sys.stderr)
+    return model, recordings
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    from transparency_ros.analysis.robot_calibration import calibrate  # noqa: PLC0415
+
+    model, recordings = _load(args, args.recordings)
+    cal = calibrate(model, recordings, args.gain, progress=lambda m: print(m, file=sys.stderr))
+    cal.save(args.out)
+    print(
+        f"calibrated {cal.robot} ({', '.join(cal.joints)}) on {len(recordings)} recordings: "
+        f"command delay {cal.command_delay_s * 1e3:.0f} ms, torque residual "
+        f"{cal.torque_rms_nm:.3f} N m RMS, mass matrix positive definite at "
+        f"{cal.mass_matrix_positive_share:.0%} of the configurations; written to {args.out}"
+    )
+    return 0
+
+
+def run_detect(args: argparse.Namespace) -> int:
+    from transparency_ros.analysis import robot_detect as rd  # noqa: PLC0415
+    from transparency_ros.analysis.robot_calibration import Calibration  # noqa: PLC0415
+
+    model, recordings = _load(args, args.recordings, args.labels)
+    recordings = [rd.in_model_order(model, r) for r in recordings]
+    if args.method == "momentum_observer":
+        if not args.calibration:
+            raise ConfigError("--method momentum_observer needs --calibration (see calibrate)")
+        cal = Calibration.load(args.calibration)
+        detections = [rd.calibrated(model, cal, r) for r in recordings]
+    else:
+        if not args.clean:
+            raise ConfigError(f"--method {args.method} needs --clean recordings for thresholds")
+        _, clean = _load(args, args.clean)
+        clean = [rd.in_model_order(model, r) for r in clean]
+
+        def signal(r: Any) -> Any:
+            if args.method == "textbook":
+                return rd.textbook_residual(model, r, args.gain)
+            return rd.position_error(r)
+
+        thresholds = rd.constant_thresholds([signal(r) for r in clean])
+        detections = [rd.with_threshold(r, signal(r), thresholds) for r in recordings]
+    if args.report:
+        from transparency_ros.analysis.robot_plots import plot_detection  # noqa: PLC0415
+
+        for det, rec in zip(detections, recordings, strict=True):
+            print(f"wrote {plot_detection(Path(args.report), det, rec)}")
+    scores = {
+        joint: rd.score(detections, recordings, joint=j)
+        for j, joint in enumerate(model.joint_names)
+    }
+    if args.json:
+        json.dump({j: _as_dict(s) for j, s in scores.items()}, sys.stdout, indent=2)
+        print()
+        return 0
+    for det in detections:
+        for joint, onsets in zip(det.joints, det.onsets_s, strict=True):
+            times = ", ".join(f"{t:.3f}" for t in onsets) or "none"
+            print(f"{det.recording} {joint}: contact onsets at [s] {times}")
+    if args.labels:
+        for joint, s in scores.items():
+            print(
+                f"{joint}: {s.found}/{s.pulses} pulses found, {s.false_alarms} false alarms "
+                f"({s.alarms_per_minute:.1f} per minute), delay median "
+                f"{s.delay_s(50) * 1e3:.0f} ms, p90 {s.delay_s(90) * 1e3:.0f} ms"
+            )
+    return 0
+
+
+def _as_dict(s: Any) -> dict[str, Any]:
+    return {
+        "pulses": s.pulses, "found": s.found, "recall": s.recall,
+        "false_alarms": s.false_alarms, "alarms_per_minute": s.alarms_per_minute,
+        "delay_median_s": s.delay_s(50), "delay_p90_s": s.delay_s(90),
+        "judged_share": s.judged_share, "missed": s.missed,
+        "minutes": s.minutes, "nan_delay": bool(np.isnan(s.delay_s(50))),
+    }  # fmt: skip
