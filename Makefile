@@ -61,6 +61,8 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/driver_loop.py
 	$(BIN)/python benchmarks/independent_rig.py
 	$(BIN)/python benchmarks/real_injection.py
+	$(BIN)/python benchmarks/momentum_observer.py
+	$(BIN)/python benchmarks/pendubot_detection.py
 
 # Bounded mutational fuzzing (not part of make test); findings: benchmarks/results/fuzz/, status 1.
 fuzz: $(STAMP)

@@ -145,3 +145,33 @@ def test_a_calibration_round_trips_and_refuses_another_robot(tmp_path: Path) -> 
     (tmp_path / "bad.yaml").write_text("robot: x\njoints: [a]\n")
     with pytest.raises(ConfigError, match=r"bad\.yaml: not a calibration file"):
         Calibration.load(tmp_path / "bad.yaml")
+
+
+SHARED = Path(__file__).resolve().parents[3] / "shared" / "external" / "double_pendulum"
+
+
+@pytest.mark.skipif(not SHARED.exists(), reason="../shared/external not present")
+def test_calibrate_and_detect_on_the_real_double_pendulum_from_the_command_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The commands a user types, on the lab's recordings: calibrate on two clean runs, detect
+    on a disturbed one with its labels, a plot per recording; and one clear line when the
+    calibration is missing."""
+    from transparency_ros.cli import main  # noqa: PLC0415
+
+    urdf = str(SHARED / "pendubot.urdf")
+    clean = [str(SHARED / f"pendubot_clean_0{k}.csv.xz") for k in (1, 2)]
+    assert main(["calibrate", *clean, "--urdf", urdf, "--out", str(tmp_path / "cal.yaml")]) == 0
+    out = capsys.readouterr()
+    assert "calibrated pendulum_mj_bots_001 (Joint1, Joint2) on 2 recordings" in out.out
+    assert "taken as the fixed world" in out.err
+    pert = str(SHARED / "pendubot_pert_01.csv.xz")
+    args = ["detect", pert, "--urdf", urdf, "--labels", "tau_pert{}"]
+    code = main([*args, "--calibration", str(tmp_path / "cal.yaml"), "--report", str(tmp_path)])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "pendubot_pert_01 Joint1: contact onsets at [s]" in out
+    assert "Joint2: " in out and " pulses found, " in out and "false alarms" in out
+    assert (tmp_path / "pendubot_pert_01.png").stat().st_size > 10_000
+    assert main(args) == 2
+    assert "--method momentum_observer needs --calibration" in capsys.readouterr().err
