@@ -337,3 +337,67 @@ def test_a_burst_beyond_the_queue_is_counted_as_lost(rig_factory: Any) -> None:
         timeout_s=3.0,
     )
     assert rig.diagnostics[-1]["joint_states_received"] == str(delivery.received)
+
+
+def test_the_momentum_observer_method_finds_a_push_on_the_joint_it_acts_on(
+    rig_factory: Any,
+) -> None:
+    """method momentum_observer with a 2-link chain's URDF as robot_description: the chain
+    tracks sines under a PD controller whose efforts go out on /joint_commands; a 0.3 N m push
+    on j1 from 1.0 s is reported on j1 (and nowhere else), /estimated_effort carries it, and a
+    sample without velocities or with a NaN is rejected, counted, and the node goes on."""
+    import numpy as np  # noqa: PLC0415
+
+    from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
+    from transparency_ros.synth.robots import chain_urdf, simulate_chain  # noqa: PLC0415
+
+    urdf = chain_urdf(2)
+    rig = rig_factory(
+        method="momentum_observer",
+        robot_description=urdf,
+        observer_gain_per_s=50.0,
+        observer_threshold_nm=0.1,
+    )
+    tau_ext = np.zeros((1500, 2))
+    tau_ext[1000:1300, 1] = 0.3
+    stamps, q, v, command = simulate_chain(RobotModel.from_urdf(urdf), tau_ext)
+    base_ns = 1_800_000_000 * 1_000_000_000
+    for k in range(len(stamps)):
+        msg = JointState(name=["j0", "j1"], effort=list(command[k]))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(base_ns + int(stamps[k]), 10**9)
+        rig.commands_pub.publish(msg)
+        state = JointState(name=["j0", "j1"], position=list(q[k]), velocity=list(v[k]))
+        state.header.stamp = msg.header.stamp
+        rig.states_pub.publish(state)
+        time.sleep(0.001)  # a 1 kHz robot
+    bad = JointState(name=["j0", "j1"], position=[0.0, 0.0])  # no velocities
+    bad.header.stamp.sec = 1_800_000_002
+    rig.states_pub.publish(bad)
+    assert wait_for(lambda: len(rig.estimates) == len(stamps), timeout_s=10.0)
+    assert [c.header.frame_id for c in rig.contacts] == ["j1"]
+    onset_s = (stamp_ns_of(rig.contacts[0]) - base_ns) * 1e-9
+    assert 1.0 < onset_s < 1.05
+    during = rig.estimates[1200]
+    assert list(during.name) == ["j0", "j1"]
+    assert during.effort[1] == pytest.approx(0.3, abs=0.03)
+    assert abs(during.effort[0]) < 0.05
+    assert wait_for(lambda: rig.node.pipeline.rejected == {"length_mismatch": 1})
+
+
+def test_the_momentum_observer_method_refuses_a_bad_robot_description(ros_context: Context
+                                                                      ) -> None:  # fmt: skip
+    from transparency_ros.core.errors import ConfigError  # noqa: PLC0415
+
+    for description, message in (
+        ("", "needs robot_description"),
+        ("<robot name='r'><link name='a'/><joint name='j' type='revolute'><parent link='a'/>"
+         "<child link='b'/></joint></robot>", "names child link 'b'"),
+    ):  # fmt: skip
+        with pytest.raises(ConfigError, match=message):
+            ContactEstimatorNode(
+                context=ros_context,
+                parameter_overrides=[
+                    Parameter("method", value="momentum_observer"),
+                    Parameter("robot_description", value=description),
+                ],
+            )

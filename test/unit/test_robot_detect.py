@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from transparency_ros.analysis import robot_detect as rd
-from transparency_ros.analysis.robot_calibration import Calibration, calibrate
+from transparency_ros.analysis.robot_calibration import calibrate
 from transparency_ros.analysis.robot_data import Columns, JointRecording, read_joint_csv
 from transparency_ros.core.errors import ConfigError
+from transparency_ros.core.robot_calibration import Calibration
 from transparency_ros.core.robot_model import RobotModel
 from transparency_ros.synth.robots import chain_urdf, simulate_chain
 

@@ -25,11 +25,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from transparency_ros.analysis.robot_calibration import Calibration, applied, effort_limit
+from transparency_ros.analysis.robot_calibration import applied, applied_torque
 from transparency_ros.analysis.robot_data import FloatArray, JointRecording
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.estimator import DetectorSettings, EventKind, SchmittDetector
 from transparency_ros.core.momentum_observer import RobotMomentumObserver
+from transparency_ros.core.robot_calibration import Calibration, effort_limit
 from transparency_ros.core.robot_model import RobotModel
 
 PULSE_LEVEL_NM = 0.05
@@ -97,7 +98,7 @@ def observer_residual(
 def calibrated(base: RobotModel, calibration: Calibration, recording: JointRecording) -> Detection:
     """The calibrated detector on ``recording`` (in the model's joint order)."""
     model = calibration.model(base)
-    torque = calibration.applied_torque(recording, effort_limit(base))
+    torque = applied_torque(calibration, recording, effort_limit(base))
     r = observer_residual(model, recording, calibration.gain_per_s, torque)
     return _detect(recording, r, calibration.threshold(recording.velocity))
 

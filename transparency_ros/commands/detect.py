@@ -127,7 +127,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 def run_detect(args: argparse.Namespace) -> int:
     from transparency_ros.analysis import robot_detect as rd  # noqa: PLC0415
-    from transparency_ros.analysis.robot_calibration import Calibration  # noqa: PLC0415
+    from transparency_ros.core.robot_calibration import Calibration  # noqa: PLC0415
 
     model, recordings = _load(args, args.recordings, args.labels)
     recordings = [rd.in_model_order(model, r) for r in recordings]

@@ -113,6 +113,11 @@ class RobotMomentumObserver:
         self.gain_per_s = gain
         self.reset()
 
+    @property
+    def last_stamp_ns(self) -> int | None:
+        """The stamp of the latest sample taken, if any."""
+        return None if self._last is None else self._last[0]
+
     def reset(self) -> None:
         self._p0: FloatArray | None = None
         self._integral = np.zeros(self.model.dof)

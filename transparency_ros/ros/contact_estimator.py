@@ -1,7 +1,12 @@
 """Node ``contact_estimator``: tau_hat = k_s (theta_d - theta_a) and contact events.
 
 Subscribes /joint_states and /joint_commands (theta_d; the ``theta_d_rad`` parameter stands in
-for joints without commands). Publishes, with standard interfaces only:
+for joints without commands). With ``method:=momentum_observer`` it runs instead the
+generalized-momentum observer of the robot in ``robot_description`` (a URDF), driven by the
+commanded efforts of /joint_commands (by joint name), with a calibration from
+``transparency calibrate`` if given (``core.robot_pipeline``); /estimated_effort's effort is then
+the estimated external torque and its position the share of the threshold (1: contact).
+Publishes, with standard interfaces only:
 
 * /estimated_effort  sensor_msgs/JointState: effort = tau_hat, position = theta_d - theta_a,
   header.stamp = the source sample's stamp;
@@ -52,6 +57,7 @@ from transparency_ros.core.cdr import (
     encode_joint_state,
     encode_wrench_stamped,
 )
+from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.estimator import (
     ContactEvent,
     DetectorSettings,
@@ -63,14 +69,53 @@ from transparency_ros.core.estimator import (
     SchmittDetector,
 )
 from transparency_ros.core.histogram import DurationHistogram
+from transparency_ros.core.robot_pipeline import ObserverPipeline
 from transparency_ros.ros import in_process
 from transparency_ros.ros.conversions import stamp_to_ns
 from transparency_ros.ros.hot_path import Delivery, HotPath
 from transparency_ros.ros.params import ParamSpec, choice_error, declare, run_node
 
 NODE_NAME = "contact_estimator"
+METHODS = ("position_error", "momentum_observer")
 P = ParamSpec
 PARAMETERS: tuple[ParamSpec, ...] = (
+    P(
+        "method",
+        "position_error",
+        "position_error: eq. (1), k_s (theta_d - theta_a); momentum_observer: the "
+        "generalized-momentum observer of a robot model (robot_description), driven by the "
+        "efforts of /joint_commands",
+        read_only=True,
+        choices=METHODS,
+    ),
+    P(
+        "robot_description",
+        "",
+        "momentum_observer: the URDF, as XML or a file path (as robot_state_publisher takes it)",
+        read_only=True,
+    ),
+    P(
+        "calibration_file",
+        "",
+        "momentum_observer: a calibration YAML from `transparency calibrate` ('': none)",
+        read_only=True,
+    ),
+    P(
+        "observer_gain_per_s",
+        20.0,
+        "momentum_observer: gain K_o [1/s] (a calibration sets its own)",
+        read_only=True,
+        low=0.1,
+        high=1000.0,
+    ),
+    P(
+        "observer_threshold_nm",
+        0.5,
+        "momentum_observer without a calibration: |residual| that starts a contact [N m]",
+        read_only=True,
+        low=1e-6,
+        high=1000.0,
+    ),
     P("joints", [""], "joint names to accept ([''] : any)", read_only=True),
     P("theta_d_rad", 0.0, "theta_d for joints without /joint_commands [rad]"),
     P(
@@ -169,17 +214,55 @@ def detector_settings(values: dict[str, Any]) -> DetectorSettings:
     return DetectorSettings(**kwargs).validated()
 
 
+def observer_settings(values: dict[str, Any]) -> DetectorSettings:
+    """The momentum observer's trigger works on |residual| / threshold: onset at 1, release at
+    0.5; the dwell times are the node's."""
+    return DetectorSettings(
+        contact_onset=1.0,
+        contact_release=0.5,
+        onset_dwell_s=values["onset_dwell_s"],
+        release_dwell_s=values["release_dwell_s"],
+    ).validated()
+
+
+def observer_pipeline(values: dict[str, Any]) -> ObserverPipeline:
+    """The ``momentum_observer`` method's pipeline: a clear ConfigError for a missing or bad
+    URDF, or a calibration from another robot."""
+    from transparency_ros.core.robot_calibration import Calibration  # noqa: PLC0415
+    from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
+
+    if not values["robot_description"].strip():
+        raise ConfigError("method momentum_observer needs robot_description (a URDF)")
+    model = RobotModel.from_urdf(values["robot_description"])
+    calibration = (
+        Calibration.load(values["calibration_file"]) if values["calibration_file"] else None
+    )
+    return ObserverPipeline(
+        model,
+        values["observer_gain_per_s"],
+        SchmittDetector(observer_settings(values)),
+        calibration,
+        values["observer_threshold_nm"],
+    )
+
+
 class ContactEstimatorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.values = declare(self, PARAMETERS)
         joints = frozenset(j for j in self.values["joints"] if j)
-        self.pipeline = EstimatorPipeline(
-            gains=EstimatorGains(**{f: self.values[n] for n, f in GAIN_PARAMS.items()}).validated(),
-            detector=SchmittDetector(detector_settings(self.values)),
-            joints=joints,
-            default_theta_d_rad=self.values["theta_d_rad"],
-        )
+        self.pipeline: EstimatorPipeline | ObserverPipeline
+        if self.values["method"] == "momentum_observer":
+            self.pipeline = observer_pipeline(self.values)
+        else:
+            self.pipeline = EstimatorPipeline(
+                gains=EstimatorGains(
+                    **{f: self.values[n] for n, f in GAIN_PARAMS.items()}
+                ).validated(),
+                detector=SchmittDetector(detector_settings(self.values)),
+                joints=joints,
+                default_theta_d_rad=self.values["theta_d_rad"],
+            )
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
         self._estimate_pub = self.create_publisher(JointState, "/estimated_effort", 100)
@@ -191,7 +274,9 @@ class ContactEstimatorNode(Node):
         self._state_pubs: dict[str, Any] = {}
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.lock = threading.Lock()  # the pipeline and the statistics, across the two threads
-        self.create_subscription(JointState, "/joint_commands", self._on_command, 10)
+        # the momentum observer needs every command's effort, not the latest few
+        depth = self.values["queue_depth"] if self.values["method"] == "momentum_observer" else 10
+        self.create_subscription(JointState, "/joint_commands", self._on_command, depth)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(self.values["diagnostics_period_s"], self._publish_diagnostics)
         self.events_published = 0
@@ -249,6 +334,9 @@ class ContactEstimatorNode(Node):
             self.values[p.name] = p.value
         gains = EstimatorGains(**{f: self.values[n] for n, f in GAIN_PARAMS.items()}).validated()
         with self.lock:
+            if isinstance(self.pipeline, ObserverPipeline):
+                self.pipeline.detector.default = observer_settings(self.values)
+                return
             self.pipeline.gains = gains
             self.pipeline.detector.default = detector_settings(self.values)
             self.pipeline.default_theta_d_rad = self.values["theta_d_rad"]
@@ -265,6 +353,15 @@ class ContactEstimatorNode(Node):
         try:
             stamp_ns = stamp_to_ns(msg.header.stamp)
             with self.lock:
+                if isinstance(self.pipeline, ObserverPipeline):
+                    self.pipeline.command(
+                        list(msg.name),
+                        list(msg.position),
+                        list(msg.velocity),
+                        stamp_ns if stamp_ns > 0 else None,
+                        efforts=list(msg.effort),
+                    )
+                    return
                 self.pipeline.command(
                     list(msg.name),
                     list(msg.position),
