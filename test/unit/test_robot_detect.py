@@ -148,10 +148,9 @@ def test_a_calibration_round_trips_and_refuses_another_robot(tmp_path: Path) -> 
         Calibration.load(tmp_path / "bad.yaml")
 
 
-SHARED = Path(__file__).resolve().parents[3] / "shared" / "external" / "double_pendulum"
+SHARED = Path(__file__).resolve().parents[1] / "data" / "double_pendulum"  # the lab's files
 
 
-@pytest.mark.skipif(not SHARED.exists(), reason="../shared/external not present")
 def test_calibrate_and_detect_on_the_real_double_pendulum_from_the_command_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

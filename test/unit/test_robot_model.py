@@ -18,9 +18,8 @@ from transparency_ros.core.robot_model import RobotModel, UrdfError
 from transparency_ros.synth.robots import chain_urdf as chain
 from transparency_ros.synth.robots import simulate_chain
 
-SHARED = Path(__file__).resolve().parents[3] / "shared" / "external" / "double_pendulum"
+SHARED = Path(__file__).resolve().parents[1] / "data" / "double_pendulum"  # the lab's files
 URDF = SHARED / "pendubot.urdf"
-needs_shared = pytest.mark.skipif(not URDF.exists(), reason="../shared/external not present")
 
 
 def lab_equations(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -38,7 +37,6 @@ def lab_equations(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.array([[m00, m01], [m01, m11]]), np.array([g0 + g1, g1])
 
 
-@needs_shared
 def test_the_labs_urdf_loads_with_a_note_and_its_gravity_is_the_labs() -> None:
     """Its fixed joint names a `world` link the file never defines (urdfdom refuses it):
     taken as the world, with a note. Gravity agrees with the lab's equations; the mass matrix
