@@ -4,7 +4,9 @@ external-torque estimates and contact events out, with the interface of
 
 The commanded torque of each joint is the effort of /joint_commands (by joint name); with a
 calibration, the one ``command_delay_s`` before the sample, limited to the URDF's effort limit,
-less the calibrated offset. A joint without a command has none applied (a passive joint). The
+less the calibrated offset. The torque of the interval between two samples is looked up when the
+second arrives: a controller sends the command for an interval after the sample that opened
+it, on another topic. A joint without a command has none applied (a passive joint). The
 residual divided by its threshold (the calibration's, by speed, or a constant) drives the
 Schmitt trigger, onset at 1. Bad samples are rejected and counted, never raised past the caller.
 """
@@ -89,6 +91,11 @@ class ObserverPipeline:
             if len(stamps) > COMMAND_HISTORY:
                 del stamps[0], values[0]
 
+    def latest_command_ns(self, joint: str) -> int | None:
+        """The stamp of the newest command held for ``joint``, if any."""
+        held = self._commands.get(joint)
+        return held[0][-1] if held else None
+
     def _latest_stamp(self) -> int:
         last = self.observer.last_stamp_ns
         return last if last is not None else 0
@@ -124,8 +131,17 @@ class ObserverPipeline:
         v = np.array([velocities[i] for i in order])
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
             raise self.reject("not_finite", "NaN or inf in a joint state")
+        last = self.observer.last_stamp_ns
         try:
-            r = self.observer.update(stamp_ns, q, v, self._torque(stamp_ns))
+            # the interval since the last sample is integrated with the command that held over
+            # it, looked up now: a controller sends it after the sample that opened the interval
+            r = self.observer.update(
+                stamp_ns,
+                q,
+                v,
+                self._torque(stamp_ns),
+                applied_since_last=None if last is None else self._torque(last),
+            )
         except EstimatorError as err:
             raise self.reject("stamp_not_increasing", str(err)) from err
         if self.calibration is not None:
