@@ -175,3 +175,58 @@ def test_calibrate_and_detect_on_the_real_double_pendulum_from_the_command_line(
     assert (tmp_path / "pendubot_pert_01.png").stat().st_size > 10_000
     assert main(args) == 2
     assert "--method momentum_observer needs --calibration" in capsys.readouterr().err
+
+
+def write_bag(path: Path, rec: JointRecording, base_ns: int = 1_800_000_000 * 10**9) -> Path:
+    """A robot's run as a driver and a controller would record it: /joint_states, then the
+    command computed from it on /joint_commands (effort)."""
+    from transparency_ros.bag.writer import BagWriter, message_types, time_msg  # noqa: PLC0415
+
+    types = message_types()
+
+    def joint_state(ns: int, **arrays: np.ndarray) -> object:
+        header = types["std_msgs/msg/Header"](stamp=time_msg(ns), frame_id="")
+        empty = np.empty(0)
+        fields = {k: arrays.get(k, empty) for k in ("position", "velocity", "effort")}
+        return types["sensor_msgs/msg/JointState"](header=header, name=list(rec.joints), **fields)
+
+    with BagWriter(path) as bag:
+        bag.add("/joint_states", "sensor_msgs/msg/JointState")
+        bag.add("/joint_commands", "sensor_msgs/msg/JointState")
+        for k, stamp in enumerate(rec.stamps_ns):
+            ns = base_ns + int(stamp)
+            state = joint_state(ns, position=rec.position[k], velocity=rec.velocity[k])
+            bag.write_message("/joint_states", ns, state)
+            bag.write_message("/joint_commands", ns + 1, joint_state(ns, effort=rec.torque[k]))
+    return path
+
+
+def test_calibrate_and_detect_read_bags_of_states_and_commands(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same simulated chain recorded as bags (/joint_states and /joint_commands' efforts):
+    read back exactly, calibrated on two, and the pushes of a third are detected."""
+    from transparency_ros.analysis.robot_data import read_joint_bag  # noqa: PLC0415
+    from transparency_ros.cli import main  # noqa: PLC0415
+
+    truth = RobotModel.from_urdf(chain_urdf(2, mass=0.65))
+    runs = [simulated(truth, 4.0, phase, []) for phase in (0.0, 1.0)]
+    runs.append(simulated(truth, 4.0, 0.5, [(0, 1.0), (1, 2.5)]))
+    bags = [write_bag(tmp_path / f"run{k}", r) for k, r in enumerate(runs)]
+    back = read_joint_bag(bags[2], ["j0", "j1"])
+    assert back.stamps_ns.tolist() == runs[2].stamps_ns.tolist()
+    assert np.array_equal(back.position, runs[2].position)
+    assert np.array_equal(back.torque, runs[2].torque)  # each sample's own command
+    (tmp_path / "chain.urdf").write_text(chain_urdf(2))
+    urdf = str(tmp_path / "chain.urdf")
+    cal = str(tmp_path / "cal.yaml")
+    assert main(["calibrate", str(bags[0]), str(bags[1]), "--urdf", urdf, "--out", cal]) == 0
+    assert main(["detect", str(bags[2]), "--urdf", urdf, "--calibration", cal]) == 0
+    out = capsys.readouterr().out
+    onsets = {
+        line.split(":")[0]: line.split("[s] ")[1] for line in out.splitlines() if "[s]" in line
+    }
+    assert float(onsets["run2 j0"].split(",")[0]) == pytest.approx(1.0, abs=0.05)
+    assert float(onsets["run2 j1"].split(",")[0]) == pytest.approx(2.5, abs=0.05)
+    with pytest.raises(ConfigError, match=r"/joint_states has no joint \['j9'\]"):
+        read_joint_bag(bags[0], ["j0", "j9"])

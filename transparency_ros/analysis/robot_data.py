@@ -5,6 +5,10 @@ Read from CSV (plain or ``.xz``) with one column per quantity and joint, numbere
 model's joint order, as the DFKI double pendulum's recordings are (``pos_meas1``, ``vel_meas1``,
 ``tau_con1``, ``tau_pert1``, ...); :class:`Columns` names the patterns. Rows whose stamp does not
 increase are dropped (noted); a NaN in a used column is an error naming the file, row and column.
+
+Or from a rosbag2 bag (:func:`read_joint_bag`): /joint_states (positions and velocities by joint
+name) and the efforts of /joint_commands, each sample taking the latest command at or before
+its stamp, as the estimator node does.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import lzma
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -137,3 +142,43 @@ def read_joint_csv(
         desired=None if desired is None else desired[keep],
         notes=notes,
     )
+
+
+def read_joint_bag(path: str | Path, joints: Sequence[str]) -> JointRecording:
+    """The run in bag ``path``: /joint_states of ``joints`` with the efforts of /joint_commands
+    held from each command's stamp (none before the first: 0)."""
+    from transparency_ros.bag.reader import open_bag  # noqa: PLC0415
+
+    with open_bag(path) as bag:
+        return _joint_bag(bag, path, joints)
+
+
+def _joint_bag(bag: Any, path: str | Path, joints: Sequence[str]) -> JointRecording:
+    from transparency_ros.bag.reader import JOINT_STATE, joint_series  # noqa: PLC0415
+
+    states = [joint_series(bag, "/joint_states", j) for j in joints]
+    missing = [j for j, s in zip(joints, states, strict=True) if s.stamp_ns.size == 0]
+    if missing:
+        raise ConfigError(f"{path}: /joint_states has no joint {missing}")
+    stamps = states[0].stamp_ns
+    if any(s.stamp_ns.size != stamps.size or np.any(s.stamp_ns != stamps) for s in states):
+        raise ConfigError(f"{path}: the joints of /joint_states are not sampled together")
+    torque = np.zeros((stamps.size, len(joints)))
+    if "/joint_commands" in bag.topics:
+        bag.require_topic("/joint_commands", JOINT_STATE)
+        for k, joint in enumerate(joints):
+            cmd = joint_series(bag, "/joint_commands", joint)
+            ok = np.isfinite(cmd.effort)
+            at = np.searchsorted(cmd.stamp_ns[ok], stamps, side="right") - 1
+            held = cmd.effort[ok]
+            if held.size:
+                torque[:, k] = np.where(at >= 0, held[np.clip(at, 0, None)], 0.0)
+    notes = [] if "/joint_commands" in bag.topics else [f"{path}: no /joint_commands: no torque"]
+    position = np.stack([s.position for s in states], axis=1)
+    velocity = np.stack([s.velocity for s in states], axis=1)
+    if not (np.all(np.isfinite(position)) and np.all(np.isfinite(velocity))):
+        raise ConfigError(f"{path}: /joint_states needs finite positions and velocities")
+    return JointRecording(
+        Path(path).name, stamps - stamps[0], tuple(joints), position, velocity, torque,
+        notes=notes,
+    )  # fmt: skip

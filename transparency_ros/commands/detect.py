@@ -18,7 +18,12 @@ METHODS = ("momentum_observer", "textbook", "position_error")
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("recordings", nargs="+", metavar="RECORDING", help="CSV files (.csv, .csv.xz)")
+    p.add_argument(
+        "recordings",
+        nargs="+",
+        metavar="RECORDING",
+        help="CSV files (.csv, .csv.xz) or rosbag2 bags (/joint_states, /joint_commands effort)",
+    )
     p.add_argument("--urdf", required=True, help="the robot's URDF file")
     p.add_argument(
         "--joints",
@@ -94,7 +99,7 @@ def _columns(text: str, labels: str | None = None, desired: str | None = None) -
 
 
 def _load(args: argparse.Namespace, paths: list[str], labels: str | None = None) -> Any:
-    from transparency_ros.analysis.robot_data import read_joint_csv  # noqa: PLC0415
+    from transparency_ros.analysis.robot_data import read_joint_bag, read_joint_csv  # noqa: PLC0415
     from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
 
     model = RobotModel.from_urdf(args.urdf)
@@ -103,7 +108,10 @@ def _load(args: argparse.Namespace, paths: list[str], labels: str | None = None)
     joints = args.joints.split(",") if args.joints else list(model.joint_names)
     columns = _columns(args.columns, labels, getattr(args, "desired", None))
     files = [f for p in paths for f in (sorted(glob.glob(p)) or [p])]
-    recordings = [read_joint_csv(f, joints, columns) for f in files]
+    recordings = [
+        read_joint_csv(f, joints, columns) if ".csv" in Path(f).name else read_joint_bag(f, joints)
+        for f in files
+    ]
     for rec in recordings:
         for note in rec.notes:
             print(f"note: {note}", file=sys.stderr)
