@@ -121,51 +121,51 @@ class RobotMomentumObserver:
     def reset(self) -> None:
         self._p0: FloatArray | None = None
         self._integral = np.zeros(self.model.dof)
-        # stamp, beta + friction, torque: of the latest sample
-        self._last: tuple[int, FloatArray, FloatArray] | None = None
+        self._last: tuple[int, FloatArray] | None = None  # stamp, beta + friction: latest sample
+        self._held_nm: FloatArray | None = None  # the torque given with the latest sample
         self.residual_nm = np.zeros(self.model.dof)
 
-    def update(
-        self,
-        stamp_ns: int,
-        q: FloatArray,
-        v: FloatArray,
-        tau_nm: FloatArray,
-        applied_since_last: FloatArray | None = None,
-    ) -> FloatArray:
+    def update(self, stamp_ns: int, q: FloatArray, v: FloatArray, tau_nm: FloatArray) -> FloatArray:
         """Feed one sample (joint positions, velocities, applied torques in the model's joint
-        order); return the residual, the estimate of the external torques [N m].
+        order); return the residual, the estimate of the external torques [N m]. The torque
+        given with a sample is the one applied until the next."""
+        tau = self._checked("torque", tau_nm)
+        held = tau if self._held_nm is None else self._held_nm
+        residual = self.step(stamp_ns, q, v, held)
+        self._held_nm = tau
+        return residual
 
-        The step from the previous sample integrates the torque applied since then: by default
-        the one given with the previous sample; ``applied_since_last`` gives it now instead (a
-        node learns the command for an interval only after the sample that opened it)."""
-        n = self.model.dof
-        q, v, tau = (np.asarray(x, dtype=float) for x in (q, v, tau_nm))
-        checks = [("position", q), ("velocity", v), ("torque", tau)]
-        if applied_since_last is not None:
-            applied_since_last = np.asarray(applied_since_last, dtype=float)
-            checks.append(("torque applied since the last sample", applied_since_last))
-        for label, x in checks:
-            if x.shape != (n,):
-                raise EstimatorError(f"{label}: expected {n} joints, got shape {x.shape}")
-            if not np.all(np.isfinite(x)):
-                raise EstimatorError(f"{label} is not finite: {x.tolist()}")
+    def step(
+        self, stamp_ns: int, q: FloatArray, v: FloatArray, applied_since_last: FloatArray
+    ) -> FloatArray:
+        """Feed one sample with the torque applied since the previous one (unused for the
+        first), for a caller that learns it only now (a node gets the command for an interval
+        after the sample that opened it); return the residual [N m]."""
+        q, v = self._checked("position", q), self._checked("velocity", v)
+        applied = self._checked("torque applied since the last sample", applied_since_last)
+        if self._last is not None and stamp_ns <= self._last[0]:
+            raise EstimatorError(f"stamps must increase (got {stamp_ns} ns after {self._last[0]})")
         p, beta = self.model.momentum_terms(q, v)
         known = beta + self.model.friction_torque(v)  # the rate of p is tau - known + tau_ext
         if self._last is None or self._p0 is None:
             self._p0 = p
-            self._last = (stamp_ns, known, tau)
+            self._last = (stamp_ns, known)
             return self.residual_nm.copy()
-        last_stamp, last_known, last_tau = self._last
-        if stamp_ns <= last_stamp:
-            raise EstimatorError(f"stamps must increase (got {stamp_ns} ns after {last_stamp})")
+        last_stamp, last_known = self._last
         dt = (stamp_ns - last_stamp) * 1e-9
-        applied = last_tau if applied_since_last is None else applied_since_last
         # rectangle rule with the previous sample (causal), as for one joint
         self._integral += (applied - last_known + self.residual_nm) * dt
         self.residual_nm = self.gain_per_s * (p - self._p0 - self._integral)
-        self._last = (stamp_ns, known, tau)
+        self._last = (stamp_ns, known)
         return self.residual_nm.copy()
+
+    def _checked(self, label: str, values: FloatArray) -> FloatArray:
+        x = np.asarray(values, dtype=float)
+        if x.shape != (self.model.dof,):
+            raise EstimatorError(f"{label}: expected {self.model.dof} joints, got shape {x.shape}")
+        if not np.all(np.isfinite(x)):
+            raise EstimatorError(f"{label} is not finite: {x.tolist()}")
+        return x
 
     def run(
         self,

@@ -132,16 +132,11 @@ class ObserverPipeline:
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
             raise self.reject("not_finite", "NaN or inf in a joint state")
         last = self.observer.last_stamp_ns
+        # the interval since the last sample is integrated with the command that held over
+        # it, looked up now: a controller sends it after the sample that opened the interval
+        applied = self._torque(last) if last is not None else np.zeros(self.model.dof)
         try:
-            # the interval since the last sample is integrated with the command that held over
-            # it, looked up now: a controller sends it after the sample that opened the interval
-            r = self.observer.update(
-                stamp_ns,
-                q,
-                v,
-                self._torque(stamp_ns),
-                applied_since_last=None if last is None else self._torque(last),
-            )
+            r = self.observer.step(stamp_ns, q, v, applied)
         except EstimatorError as err:
             raise self.reject("stamp_not_increasing", str(err)) from err
         if self.calibration is not None:
