@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -32,9 +33,10 @@ from scipy.signal import savgol_filter
 
 from transparency_ros.analysis.robot_data import FloatArray, JointRecording
 from transparency_ros.core.errors import ConfigError
-from transparency_ros.core.momentum_observer import RobotMomentumObserver
+from transparency_ros.core.estimator import DetectorSettings, EventKind, SchmittDetector
 from transparency_ros.core.robot_calibration import SPEED_BANDS, Calibration, effort_limit
 from transparency_ros.core.robot_model import RobotModel
+from transparency_ros.core.robot_pipeline import ObserverPipeline
 
 DELAYS_S = tuple(k * 1e-3 for k in range(0, 21))  # command delays tried
 GRID_S = 0.002  # the positions are resampled on this grid for the regressor
@@ -43,11 +45,27 @@ MARGIN = 1.2  # thresholds: the largest calibration residual times this
 RIDGE = 1e-3  # drawn towards the URDF's values, relative
 
 
-def applied_torque(cal: Calibration, recording: JointRecording, limit: FloatArray) -> FloatArray:
-    """The torque the motors applied, as ``cal`` sees it: the command, limited,
-    ``command_delay_s`` earlier, less the offset."""
-    out: FloatArray = applied(recording, cal.command_delay_s, limit) - np.array(cal.offset_nm)
-    return out
+def run_pipeline(
+    base: RobotModel, cal: Calibration, recording: JointRecording
+) -> tuple[FloatArray, list[list[float]]]:
+    """The estimator node's pipeline (:class:`ObserverPipeline`) over ``recording`` (in the
+    model's joint order), each sample's command given before it: the residuals (samples,
+    joints) and each joint's contact onsets [s]. Offline results are then the node's."""
+    detector = SchmittDetector(DetectorSettings(contact_onset=1.0, contact_release=0.5))
+    pipeline = ObserverPipeline(base, cal.gain_per_s, detector, cal)
+    names = list(recording.joints)
+    residual = np.empty(recording.position.shape)
+    onsets: list[list[float]] = [[] for _ in names]
+    for k, stamp in enumerate(recording.stamps_ns.tolist()):
+        pipeline.command(names, [], [], stamp, efforts=recording.torque[k].tolist())
+        estimates, events = pipeline.sample(
+            stamp, names, recording.position[k].tolist(), recording.velocity[k].tolist()
+        )
+        residual[k] = [e.torque_nm for e in estimates]
+        for event in events:
+            if event.kind is EventKind.CONTACT_ONSET:
+                onsets[names.index(event.joint)].append(event.stamp_ns * 1e-9)
+    return residual, onsets
 
 
 def applied(recording: JointRecording, delay_s: float, limit: FloatArray) -> FloatArray:
@@ -195,15 +213,12 @@ def _thresholds(
 ) -> list[list[float]]:
     """Per joint and speed band: the largest calibration residual times MARGIN, carried up to
     the faster bands (never lower at a higher speed)."""
-    model = cal.model(base)
-    limit = effort_limit(base)
     bands = np.asarray(cal.speed_bands_rad_s)
+    blind = replace(cal, thresholds_nm=[[math.inf] * bands.size] * base.dof)  # no events
     top = np.zeros((base.dof, bands.size))
     seen = np.zeros(bands.size, dtype=bool)
     for rec in recordings:
-        r = RobotMomentumObserver(model, cal.gain_per_s).run(
-            rec.stamps_ns, rec.position, rec.velocity, applied_torque(cal, rec, limit)
-        )
+        r, _ = run_pipeline(base, blind, rec)
         speed = np.linalg.norm(rec.velocity, axis=1)
         band = np.clip(np.searchsorted(bands, speed, side="right") - 1, 0, bands.size - 1)
         for b in np.unique(band):

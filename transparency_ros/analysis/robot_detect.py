@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from transparency_ros.analysis.robot_calibration import applied, applied_torque
+from transparency_ros.analysis.robot_calibration import applied, run_pipeline
 from transparency_ros.analysis.robot_data import FloatArray, JointRecording
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.estimator import DetectorSettings, EventKind, SchmittDetector
@@ -96,11 +96,12 @@ def observer_residual(
 
 
 def calibrated(base: RobotModel, calibration: Calibration, recording: JointRecording) -> Detection:
-    """The calibrated detector on ``recording`` (in the model's joint order)."""
-    model = calibration.model(base)
-    torque = applied_torque(calibration, recording, effort_limit(base))
-    r = observer_residual(model, recording, calibration.gain_per_s, torque)
-    return _detect(recording, r, calibration.threshold(recording.velocity))
+    """The calibrated detector on ``recording`` (in the model's joint order), as the node
+    runs it."""
+    residual, onsets = run_pipeline(base, calibration, recording)
+    t = np.asarray(recording.stamps_ns * 1e-9, dtype=np.float64)
+    threshold = calibration.threshold(recording.velocity)
+    return Detection(recording.name, recording.joints, t, residual, threshold, onsets)
 
 
 def textbook_residual(
