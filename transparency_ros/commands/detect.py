@@ -98,13 +98,22 @@ def _columns(text: str, labels: str | None = None, desired: str | None = None) -
     return Columns(**values, label=labels, desired=desired)  # type: ignore[arg-type]
 
 
-def _load(args: argparse.Namespace, paths: list[str], labels: str | None = None) -> Any:
-    from transparency_ros.analysis.robot_data import read_joint_bag, read_joint_csv  # noqa: PLC0415
+def _model(args: argparse.Namespace) -> Any:
     from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
 
     model = RobotModel.from_urdf(args.urdf)
     for note in model.notes:
         print(f"note: {note}", file=sys.stderr)
+    return model
+
+
+def _recordings(
+    args: argparse.Namespace, model: Any, paths: list[str], labels: str | None = None
+) -> list[Any]:
+    """The recordings in ``paths`` (CSV or bags, globs expanded), in the model's joint order."""
+    from transparency_ros.analysis.robot_data import read_joint_bag, read_joint_csv  # noqa: PLC0415
+    from transparency_ros.analysis.robot_detect import in_model_order  # noqa: PLC0415
+
     joints = args.joints.split(",") if args.joints else list(model.joint_names)
     columns = _columns(args.columns, labels, getattr(args, "desired", None))
     files = [f for p in paths for f in (sorted(glob.glob(p)) or [p])]
@@ -115,13 +124,14 @@ def _load(args: argparse.Namespace, paths: list[str], labels: str | None = None)
     for rec in recordings:
         for note in rec.notes:
             print(f"note: {note}", file=sys.stderr)
-    return model, recordings
+    return [in_model_order(model, r) for r in recordings]
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
     from transparency_ros.analysis.robot_calibration import calibrate  # noqa: PLC0415
 
-    model, recordings = _load(args, args.recordings)
+    model = _model(args)
+    recordings = _recordings(args, model, args.recordings)
     cal = calibrate(model, recordings, args.gain, progress=lambda m: print(m, file=sys.stderr))
     cal.save(args.out)
     print(
@@ -137,8 +147,8 @@ def run_detect(args: argparse.Namespace) -> int:
     from transparency_ros.analysis import robot_detect as rd  # noqa: PLC0415
     from transparency_ros.core.robot_calibration import Calibration  # noqa: PLC0415
 
-    model, recordings = _load(args, args.recordings, args.labels)
-    recordings = [rd.in_model_order(model, r) for r in recordings]
+    model = _model(args)
+    recordings = _recordings(args, model, args.recordings, args.labels)
     if args.method == "momentum_observer":
         if not args.calibration:
             raise ConfigError("--method momentum_observer needs --calibration (see calibrate)")
@@ -147,8 +157,7 @@ def run_detect(args: argparse.Namespace) -> int:
     else:
         if not args.clean:
             raise ConfigError(f"--method {args.method} needs --clean recordings for thresholds")
-        _, clean = _load(args, args.clean)
-        clean = [rd.in_model_order(model, r) for r in clean]
+        clean = _recordings(args, model, args.clean)
 
         def signal(r: Any) -> Any:
             if args.method == "textbook":

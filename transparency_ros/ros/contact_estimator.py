@@ -332,11 +332,12 @@ class ContactEstimatorNode(Node):
     def _apply(self, params: list[Parameter]) -> None:
         for p in params:
             self.values[p.name] = p.value
+        if isinstance(self.pipeline, ObserverPipeline):
+            with self.lock:
+                self.pipeline.detector.default = observer_settings(self.values)
+            return
         gains = EstimatorGains(**{f: self.values[n] for n, f in GAIN_PARAMS.items()}).validated()
         with self.lock:
-            if isinstance(self.pipeline, ObserverPipeline):
-                self.pipeline.detector.default = observer_settings(self.values)
-                return
             self.pipeline.gains = gains
             self.pipeline.detector.default = detector_settings(self.values)
             self.pipeline.default_theta_d_rad = self.values["theta_d_rad"]
@@ -352,22 +353,17 @@ class ContactEstimatorNode(Node):
     def _on_command(self, msg: JointState) -> None:
         try:
             stamp_ns = stamp_to_ns(msg.header.stamp)
+            args = (
+                list(msg.name),
+                list(msg.position),
+                list(msg.velocity),
+                stamp_ns if stamp_ns > 0 else None,
+            )
             with self.lock:
                 if isinstance(self.pipeline, ObserverPipeline):
-                    self.pipeline.command(
-                        list(msg.name),
-                        list(msg.position),
-                        list(msg.velocity),
-                        stamp_ns if stamp_ns > 0 else None,
-                        efforts=list(msg.effort),
-                    )
-                    return
-                self.pipeline.command(
-                    list(msg.name),
-                    list(msg.position),
-                    list(msg.velocity),
-                    stamp_ns if stamp_ns > 0 else None,
-                )
+                    self.pipeline.command(*args, efforts=list(msg.effort))
+                else:
+                    self.pipeline.command(*args)
         except SampleRejectedError as err:
             self._warn(f"rejected /joint_commands: {err}")
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Sequence
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -287,13 +288,15 @@ class DropProblem:
     def noise_floor(self) -> float:
         """RMS error sensor noise alone gives: encoder (quantization) and potentiometer noise,
         weighted by how many samples of each are compared."""
-        q_noise, h_noise = self._sensor_noise()
+        q_noise, h_noise = self._sensor_noise
         n_q = sum(q.size for _, q in self.fit.q)
         n_h = sum(h.size for _, h in self.fit.h) + sum(h.size for _, h in self.fit.fall)
         return float(math.sqrt((n_q * q_noise**2 + n_h * h_noise**2) / max(1, n_q + n_h)))
 
+    @cached_property
     def _sensor_noise(self) -> tuple[float, float]:
-        """The encoder's and the height sensor's noise [rad at the arm's length] at rest."""
+        """The encoder's and the height sensor's noise [rad at the arm's length] at rest
+        (made once: the loop asks for them at every candidate step of a sensor effect)."""
         q_noise = float(
             np.sqrt(
                 np.mean(
@@ -321,10 +324,13 @@ class DropProblem:
         reason (a friction hump the encoder's 3 mrad lattice hides)."""
         if not effects or any(e.sensor != "encoder" for e in effects):
             return None
-        mask = np.concatenate(
+        return self._encoder_elements, self._sensor_noise[0]
+
+    @cached_property
+    def _encoder_elements(self) -> BoolArray:
+        return np.concatenate(
             [np.full(t.size, piece == "encoder") for _, piece, t in self.held.layout()]
         )
-        return mask, self._sensor_noise()[0]
 
     def residual_peak_hz(
         self, effects: Sequence[DropEffect], params: Sequence[FloatArray]
