@@ -390,3 +390,114 @@ def test_a_persistently_late_device_is_reported(driver_factory: Any) -> None:
     assert node.core.mode is DriverMode.ACTIVE  # alive: no fault
     node.sim.faults.reply_delay_s = 0.0
     assert wait_for(lambda: probe.diagnostics[-1].level == DiagnosticStatus.OK, timeout_s=5.0)
+
+
+# ------------------------------------------------------------------- several motors (issue 18)
+
+JOINTS = ["hip", "knee", "ankle"]
+
+
+def motors(ids: list[int], **params: Any) -> dict[str, Any]:
+    return {"motor_ids": ids, "joint_names": JOINTS[: len(ids)], "command_timeout_s": 5.0,
+            **params}  # fmt: skip
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_several_motors_in_one_process(driver_factory: Any, protocol: str) -> None:
+    node, probe = driver_factory(protocol, **motors([1, 2, 3]))
+    assert node.configured and len(node.cores) == 3
+    assert wait_for(lambda: len(probe.states) > 20, 5.0)
+    assert list(probe.states[-1].name) == JOINTS
+    targets = {"hip": 0.3, "knee": -0.2, "ankle": 0.1}
+    probe.commands.publish(JointState(name=list(targets), position=list(targets.values())))
+
+    def at_targets() -> bool:
+        last = probe.states[-1]
+        return len(last.name) == 3 and all(
+            abs(p - targets[n]) < 0.02 for n, p in zip(last.name, last.position, strict=True)
+        )
+
+    assert wait_for(at_targets, 5.0), probe.states[-1]
+    # a command naming one joint moves that one; others keep their targets
+    probe.commands.publish(JointState(name=["knee", "other_robot_joint"], position=[0.2, 9.0]))
+    assert wait_for(lambda: abs(probe.states[-1].position[1] - 0.2) < 0.02, 5.0)
+    assert abs(probe.states[-1].position[0] - 0.3) < 0.02
+    # a bad value rejects the whole message (no joint moves), and the node keeps running
+    probe.commands.publish(JointState(name=["hip", "knee"], position=[-0.3, math.nan]))
+    assert wait_for(lambda: node.cores[0].status.commands_rejected == 1, 3.0)
+    assert "position of 'knee' is nan" in node.cores[0].status.last_rejection
+    probe.commands.publish(JointState(name=["wrist"], position=[0.0]))
+    assert wait_for(lambda: node.cores[0].status.commands_rejected == 2, 3.0)
+    assert "none of ['hip', 'knee', 'ankle']" in node.cores[2].status.last_rejection
+    probe.commands.publish(JointState(position=[0.0]))
+    assert wait_for(lambda: node.cores[0].status.commands_rejected == 3, 3.0)
+    assert "need joint names" in node.cores[1].status.last_rejection
+    time.sleep(0.2)
+    assert abs(probe.states[-1].position[0] - 0.3) < 0.02
+    assert wait_for(lambda: any(d.name.endswith(": loop") for d in probe.diagnostics), 3.0)
+    names = {d.name for d in probe.diagnostics}
+    assert {f"actuator_driver: {j}" for j in JOINTS} <= names
+    node.trigger_deactivate()
+    assert not any(p.is_enabled() for sim in node.sim_buses for p in sim.personalities)
+
+
+@pytest.mark.parametrize("policy", ["all", "motor"])
+def test_one_silent_motor_among_several(driver_factory: Any, policy: str) -> None:
+    node, probe = driver_factory(
+        "mit", **motors([1, 2, 3], fault_policy=policy, max_missed_replies=5)
+    )
+    assert wait_for(lambda: len(probe.states) > 20, 5.0)
+    sim = node.sim_buses[0]
+    sim.silence(1)
+    assert wait_for(lambda: node.cores[1].mode is DriverMode.FAULT, 3.0)
+    assert wait_for(
+        lambda: any(d.name == "actuator_driver: knee" and d.level == DiagnosticStatus.ERROR
+                    for d in probe.diagnostics), 3.0,
+    )  # fmt: skip
+    if policy == "all":
+        assert wait_for(lambda: not any(sim.enabled()), 2.0)
+        assert all(core.mode is DriverMode.FAULT for core in node.cores)
+    else:
+        time.sleep(0.2)
+        assert sim.enabled() == [True, False, True]
+        assert list(probe.states[-1].name) == ["hip", "ankle"]
+        # re-enabling needs every motor to answer; with the knee still silent it fails safe
+        response = probe.call(SetBool, "/actuator_driver/enable", SetBool.Request(data=True))
+        assert not response.success and "knee" in response.message
+        assert not any(sim.enabled())
+        sim.silence(1, False)
+        response = probe.call(SetBool, "/actuator_driver/enable", SetBool.Request(data=True))
+        assert response.success, response.message
+        assert wait_for(lambda: all(sim.enabled()), 2.0)
+
+
+def test_several_motors_on_two_buses_and_bad_lists(driver_factory: Any) -> None:
+    node, probe = driver_factory(
+        "mit", **motors([1, 2, 3], channels=["bus_a_multi", "bus_b_multi", "bus_a_multi"])
+    )
+    assert len(node.sim_buses) == 2 and len(node.loop.clients) == 2
+    assert wait_for(lambda: len(probe.states) > 20 and len(probe.states[-1].name) == 3, 5.0)
+    response = probe.call(Trigger, "/actuator_driver/set_zero", Trigger.Request())
+    assert response.success, response.message
+    bad, _ = driver_factory("mit", motor_ids=[1, 2], joint_names=["a"])
+    assert not bad.configured
+    dup, _ = driver_factory("mit", motor_ids=[1, 1])
+    assert not dup.configured
+
+
+def test_several_motors_process_exits_with_every_motor_disabled(ros_context: Context) -> None:
+    proc = start_driver_process("-p", "motor_ids:=[1,2,3,4]")
+    probe = make_probe(ros_context)
+    spinner = Spinner(ros_context, probe.node)
+    try:
+        assert wait_for(lambda: len(probe.states) > 20, 15.0), "no /joint_states"
+        assert list(probe.states[-1].name) == [f"joint_{i}" for i in (1, 2, 3, 4)]
+        proc.send_signal(signal.SIGINT)
+        output, _ = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        spinner.stop()
+        probe.node.destroy_node()
+    assert proc.returncode == 0, output
+    assert "simulated motors enabled at exit: 0 of 4" in output

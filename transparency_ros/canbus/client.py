@@ -99,8 +99,12 @@ class ActuatorClient:
         bus: can.BusABC,
         *,
         clock: Callable[[], float] = time.monotonic,
+        decode: Callable[[Frame], Feedback | None] | None = None,
     ) -> None:
+        """``decode`` replaces ``protocol.decode`` (a bus of several motors routes frames to
+        the protocol of the motor they come from, ``canbus.multi``)."""
         self.protocol = protocol
+        self.decode = decode or protocol.decode
         self.bus: can.BusABC | None = bus
         self.clock = clock
         self.counters = BusCounters()
@@ -147,7 +151,7 @@ class ActuatorClient:
                 continue
             self.counters.rx += 1
             try:
-                feedback = self.protocol.decode(to_frame(msg))
+                feedback = self.decode(to_frame(msg))
             except MalformedFrameError as err:
                 self.counters.malformed += 1
                 self.counters.last_error = f"malformed frame 0x{msg.arbitration_id:x}: {err}"

@@ -43,9 +43,108 @@ class LoopStats:
     jitter_p50_s: float
     jitter_p99_s: float
     jitter_max_s: float
+    cpu_p50_s: float = 0.0  # the loop thread's CPU time per cycle (its own cost, not waits)
+    cpu_p99_s: float = 0.0
 
 
-class ControlLoop:
+class PeriodicLoop:
+    """A thread running :meth:`cycle` every period on absolute deadlines, measuring itself.
+    An exception out of a cycle stops the loop after :meth:`emergency_stop` (motors safe)."""
+
+    def __init__(
+        self,
+        rate_hz: float,
+        on_error: Callable[[BaseException], None],
+        clock: Callable[[], float],
+        stats_window: int,
+        name: str,
+    ) -> None:
+        if not rate_hz > 0:
+            raise ValueError(f"rate must be > 0 Hz, got {rate_hz}")
+        self.period_s = 1.0 / rate_hz
+        self.on_error = on_error
+        self.clock = clock
+        self.name = name
+        self.lock = threading.RLock()  # guards the cores and the buses between loop and callers
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._starts: deque[float] = deque(maxlen=stats_window)
+        self._cpu: deque[int] = deque(maxlen=stats_window)
+        self.cycles = 0
+        self.overruns = 0
+
+    def cycle(self) -> None:
+        raise NotImplementedError
+
+    def emergency_stop(self, reason: str) -> None:
+        """Leave every motor safe after a failure of the loop itself."""
+        raise NotImplementedError
+
+    def start(self) -> None:
+        if self._thread is not None:
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def _run(self) -> None:
+        deadline = self.clock()
+        try:
+            while not self._stop.is_set():
+                start = self.clock()
+                self._starts.append(start)
+                self.cycles += 1
+                cpu = time.thread_time_ns()
+                self.cycle()
+                self._cpu.append(time.thread_time_ns() - cpu)
+                deadline += self.period_s
+                remaining = deadline - self.clock()
+                if remaining < -self.period_s:
+                    self.overruns += 1
+                    deadline = self.clock()
+                elif remaining > 0:
+                    self._stop.wait(remaining)
+        except BaseException as err:  # noqa: BLE001 - any failure must leave the motors safe
+            with self.lock:
+                self.emergency_stop(f"loop error: {err!r}")
+            self.on_error(err)
+
+    def stats(self) -> LoopStats:
+        starts = np.array(self._starts)
+        if starts.size < 3:
+            return LoopStats(self.cycles, self.overruns, 0.0, 0.0, 0.0, 0.0)
+        periods = np.diff(starts)
+        jitter = np.abs(periods - self.period_s)
+        cpu = np.array(self._cpu, dtype=float) * 1e-9
+        return LoopStats(
+            cycles=self.cycles,
+            overruns=self.overruns,
+            rate_hz=float(periods.size / (starts[-1] - starts[0])),
+            jitter_p50_s=float(np.percentile(jitter, 50)),
+            jitter_p99_s=float(np.percentile(jitter, 99)),
+            jitter_max_s=float(jitter.max()),
+            cpu_p50_s=float(np.percentile(cpu, 50)) if cpu.size else 0.0,
+            cpu_p99_s=float(np.percentile(cpu, 99)) if cpu.size else 0.0,
+        )
+
+    def reset_stats(self) -> None:
+        self._starts.clear()
+        self._cpu.clear()
+
+
+class ControlLoop(PeriodicLoop):
+    """One actuator's loop (``canbus.multi.MultiControlLoop`` drives several)."""
+
     def __init__(
         self,
         client: ActuatorClient,
@@ -59,41 +158,15 @@ class ControlLoop:
         clock: Callable[[], float] = time.monotonic,
         stats_window: int = 5000,
     ) -> None:
-        if not rate_hz > 0:
-            raise ValueError(f"rate must be > 0 Hz, got {rate_hz}")
+        super().__init__(rate_hz, on_error, clock, stats_window, "actuator_loop")
         self.client = client
         self.core = core
-        self.period_s = 1.0 / rate_hz
         self.reply_timeout_s = min(reply_timeout_s, 0.9 * self.period_s)
-        self.on_sample, self.on_fault, self.on_error = on_sample, on_fault, on_error
-        self.clock = clock
-        self.lock = threading.RLock()  # guards core and client between loop and callers
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._starts: deque[float] = deque(maxlen=stats_window)
-        self.cycles = 0
-        self.overruns = 0
+        self.on_sample, self.on_fault = on_sample, on_fault
         self._last_sample_s = -math.inf
         self._last_rx_wall_s = -math.inf  # bus time of the newest reply handed on
 
     # ----------------------------------------------------------------- control
-
-    def start(self) -> None:
-        if self._thread is not None:
-            return
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="actuator_loop", daemon=True)
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None and thread is not threading.current_thread():
-            thread.join(timeout=2.0)
-
-    @property
-    def running(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
 
     def enable(self, timeout_s: float = 0.2) -> Feedback | None:
         """Enable the motor and activate the core at the position it reports (None: no reply)."""
@@ -193,44 +266,7 @@ class ControlLoop:
         if reason:
             self.on_fault(reason)
 
-    def _run(self) -> None:
-        deadline = self.clock()
-        try:
-            while not self._stop.is_set():
-                start = self.clock()
-                self._starts.append(start)
-                self.cycles += 1
-                self.cycle()
-                deadline += self.period_s
-                remaining = deadline - self.clock()
-                if remaining < -self.period_s:
-                    self.overruns += 1
-                    deadline = self.clock()
-                elif remaining > 0:
-                    self._stop.wait(remaining)
-        except BaseException as err:  # noqa: BLE001 - any failure must leave the motor safe
-            with self.lock:
-                self.core.fault(f"loop error: {err!r}")
-                if self.client.bus is not None:
-                    self.client.send(self.client.protocol.disable_frames())
-            self.on_error(err)
-
-    # ----------------------------------------------------------------- measurement
-
-    def stats(self) -> LoopStats:
-        starts = np.array(self._starts)
-        if starts.size < 3:
-            return LoopStats(self.cycles, self.overruns, 0.0, 0.0, 0.0, 0.0)
-        periods = np.diff(starts)
-        jitter = np.abs(periods - self.period_s)
-        return LoopStats(
-            cycles=self.cycles,
-            overruns=self.overruns,
-            rate_hz=float(periods.size / (starts[-1] - starts[0])),
-            jitter_p50_s=float(np.percentile(jitter, 50)),
-            jitter_p99_s=float(np.percentile(jitter, 99)),
-            jitter_max_s=float(jitter.max()),
-        )
-
-    def reset_stats(self) -> None:
-        self._starts.clear()
+    def emergency_stop(self, reason: str) -> None:
+        self.core.fault(reason)
+        if self.client.bus is not None:
+            self.client.send(self.client.protocol.disable_frames())

@@ -72,6 +72,16 @@ class ActuatorProtocol(ABC):
     @abstractmethod
     def command_frames(self, cmd: ImpedanceCommand, last: Feedback | None) -> list[Frame]: ...
 
+    @property
+    @abstractmethod
+    def device_id(self) -> int:
+        """The id this device answers with (what :meth:`sender` returns for its frames)."""
+
+    @abstractmethod
+    def sender(self, frame: Frame) -> int | None:
+        """Which device of this protocol sent ``frame`` (None: not a device's frame). Lets a
+        bus of several motors route a frame to its motor without trying every decoder."""
+
     @abstractmethod
     def decode(self, frame: Frame) -> Feedback | None:
         """A complete sample from this actuator, None for frames that are not (or not yet) one.
@@ -127,6 +137,15 @@ class MitProtocol(ActuatorProtocol):
 
     def command_frames(self, cmd: ImpedanceCommand, last: Feedback | None) -> list[Frame]:
         return [self._command(cmd)]
+
+    @property
+    def device_id(self) -> int:
+        return self.motor_id & 0xFF
+
+    def sender(self, frame: Frame) -> int | None:
+        if frame.arbitration_id != self.master_id or frame.is_remote or not frame.data:
+            return None
+        return frame.data[0]
 
     def decode(self, frame: Frame) -> Feedback | None:
         if frame.arbitration_id != self.master_id or frame.is_remote or not frame.data:
@@ -196,6 +215,15 @@ class ODriveProtocol(ActuatorProtocol):
             torque += cmd.kd_nms_per_rad * (cmd.velocity_rad_s - last.velocity_rad_s)
         native = odrive.encode_set_input_torque(torque / self.gear_ratio)
         return [Frame(self._id(odrive.Cmd.SET_INPUT_TORQUE), native), *self._requests()]
+
+    @property
+    def device_id(self) -> int:
+        return self.node_id
+
+    def sender(self, frame: Frame) -> int | None:
+        if frame.is_remote or frame.arbitration_id > 0x7FF:
+            return None
+        return frame.arbitration_id >> 5
 
     def decode(self, frame: Frame) -> Feedback | None:
         if frame.is_remote or frame.arbitration_id > 0x7FF:
@@ -282,6 +310,18 @@ class MoteusProtocol(ActuatorProtocol):
             query=moteus_fd.DEFAULT_QUERY,
         )
         return [self._frame(payload)]
+
+    @property
+    def device_id(self) -> int:
+        return self._device_id
+
+    @device_id.setter
+    def device_id(self, value: int) -> None:
+        self._device_id = value
+
+    def sender(self, frame: Frame) -> int | None:
+        source, destination, _ = moteus_fd.split_id(frame.arbitration_id)
+        return None if destination != self.source_id or frame.is_remote else source
 
     def decode(self, frame: Frame) -> Feedback | None:
         source, destination, _ = moteus_fd.split_id(frame.arbitration_id)

@@ -9,8 +9,10 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
 from transparency_ros.canbus.client import ActuatorClient
-from transparency_ros.canbus.loop import ControlLoop
+from transparency_ros.canbus.loop import ControlLoop, PeriodicLoop
+from transparency_ros.canbus.multi import MultiControlLoop
 from transparency_ros.core.driver import DriverCore, DriverMode
+from transparency_ros.ros.actuator_driver.hardware import MotorSpec
 from transparency_ros.ros.actuator_driver.parameters import NODE_NAME
 
 LATE_WARN_FRACTION = 0.5  # more of a period's replies late than this: WARN
@@ -42,25 +44,8 @@ def driver_status(
         hardware_id=f"{values['protocol']}:{values['motor_id']}",
     )
     s = core.status
-    if s.mode is DriverMode.FAULT:
-        status.level, status.message = DiagnosticStatus.ERROR, f"FAULT: {s.fault_reason}"
-    elif client is None:
-        status.level, status.message = DiagnosticStatus.WARN, "not configured"
-    elif s.command_timed_out:
-        status.level = DiagnosticStatus.WARN
-        status.message = f"no command for {core.settings.command_timeout_s} s: "
-        status.message += core.settings.timeout_action.value
-    elif (late := late_in_period()) is not None:
-        status.level, status.message = DiagnosticStatus.WARN, late
-    else:
-        status.level, status.message = DiagnosticStatus.OK, s.mode.value
-    report: dict[str, Any] = {
-        "mode": s.mode.value, "interface": values["interface"],
-        "channel": values["channel"], "commands_accepted": s.commands_accepted,
-        "commands_rejected": s.commands_rejected, "commands_clamped": s.commands_clamped,
-        "missed_replies_total": s.missed_replies_total,
-        "missed_replies_in_row": s.missed_replies_in_row, "last_rejection": s.last_rejection,
-    }  # fmt: skip
+    status.level, status.message = _level(core, client is not None, late_in_period)
+    report = _core_report(core, values["interface"], values["channel"])
     if client is not None:
         c = client.counters
         report.update(
@@ -76,14 +61,85 @@ def driver_status(
             last_bus_error=c.last_error,
         )
     if loop is not None:
-        st = loop.stats()
-        report.update(
-            loop_rate_hz=f"{st.rate_hz:.1f}",
-            loop_cycles=st.cycles,
-            overruns=st.overruns,
-            jitter_p50_us=f"{st.jitter_p50_s * 1e6:.0f}",
-            jitter_p99_us=f"{st.jitter_p99_s * 1e6:.0f}",
-            jitter_max_us=f"{st.jitter_max_s * 1e6:.0f}",
-        )
+        report.update(_loop_report(loop))
     status.values = [KeyValue(key=k, value=str(val)) for k, val in report.items()]
     return status
+
+
+def _level(core: DriverCore, configured: bool, late: Callable[[], str | None]) -> tuple[bytes, str]:
+    s = core.status
+    if s.mode is DriverMode.FAULT:
+        return DiagnosticStatus.ERROR, f"FAULT: {s.fault_reason}"
+    if not configured:
+        return DiagnosticStatus.WARN, "not configured"
+    if s.command_timed_out:
+        timeout = core.settings
+        return (
+            DiagnosticStatus.WARN,
+            f"no command for {timeout.command_timeout_s} s: {timeout.timeout_action.value}",
+        )
+    if (message := late()) is not None:
+        return DiagnosticStatus.WARN, message
+    return DiagnosticStatus.OK, s.mode.value
+
+
+def _core_report(core: DriverCore, interface: str, channel: str) -> dict[str, Any]:
+    s = core.status
+    return {
+        "mode": s.mode.value, "interface": interface, "channel": channel,
+        "commands_accepted": s.commands_accepted, "commands_rejected": s.commands_rejected,
+        "commands_clamped": s.commands_clamped, "missed_replies_total": s.missed_replies_total,
+        "missed_replies_in_row": s.missed_replies_in_row, "last_rejection": s.last_rejection,
+    }  # fmt: skip
+
+
+def _loop_report(loop: PeriodicLoop) -> dict[str, Any]:
+    st = loop.stats()
+    return {
+        "loop_rate_hz": f"{st.rate_hz:.1f}",
+        "loop_cycles": st.cycles,
+        "overruns": st.overruns,
+        "jitter_p50_us": f"{st.jitter_p50_s * 1e6:.0f}",
+        "jitter_p99_us": f"{st.jitter_p99_s * 1e6:.0f}",
+        "jitter_max_us": f"{st.jitter_max_s * 1e6:.0f}",
+        "cycle_cpu_p50_us": f"{st.cpu_p50_s * 1e6:.0f}",
+        "cycle_cpu_p99_us": f"{st.cpu_p99_s * 1e6:.0f}",
+    }
+
+
+def robot_statuses(
+    values: dict[str, Any], loop: MultiControlLoop, specs: list[MotorSpec]
+) -> list[DiagnosticStatus]:
+    """Several motors: one status per motor (its core, replies, late ones) and one for the loop
+    and its buses."""
+    statuses = []
+    for motor, spec in zip(loop.motors, specs, strict=True):
+        status = DiagnosticStatus(
+            name=f"{NODE_NAME}: {motor.name}",
+            hardware_id=f"{values['protocol']}:{spec.motor_id}@{spec.channel}",
+        )
+        status.level, status.message = _level(motor.core, True, lambda: None)
+        report = _core_report(motor.core, values["interface"], spec.channel)
+        report.update(samples=motor.samples, late_replies=motor.late, duplicates=motor.duplicates)
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in report.items()]
+        statuses.append(status)
+    worst = max((s.level for s in statuses), key=ord)
+    loop_status = DiagnosticStatus(
+        name=f"{NODE_NAME}: loop", hardware_id=values["interface"], level=worst
+    )
+    faulted = [s.name.split(": ", 1)[1] for s in statuses if s.level == DiagnosticStatus.ERROR]
+    loop_status.message = f"FAULT: {', '.join(faulted)}" if faulted else (
+        f"{len(loop.motors)} motors on {len(loop.clients)} bus(es)")  # fmt: skip
+    summary: dict[str, Any] = {"motors": len(loop.motors), "fault_policy": loop.fault_policy}
+    summary.update(_loop_report(loop))
+    for spec_channel, client in zip(
+        dict.fromkeys(s.channel for s in specs), loop.clients, strict=True
+    ):
+        c = client.counters
+        summary[f"{spec_channel}.tx"] = c.tx
+        summary[f"{spec_channel}.rx"] = c.rx
+        summary[f"{spec_channel}.errors"] = c.tx_errors + c.rx_errors
+        summary[f"{spec_channel}.malformed"] = c.malformed
+        summary[f"{spec_channel}.other_frames"] = c.other
+    loop_status.values = [KeyValue(key=k, value=str(v)) for k, v in summary.items()]
+    return [*statuses, loop_status]

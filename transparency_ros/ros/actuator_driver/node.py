@@ -34,13 +34,14 @@ from transparency_ros.canbus.client import ActuatorClient, BusSettings
 from transparency_ros.canbus.clock import ClockOffset
 from transparency_ros.canbus.errors import CanProtocolError
 from transparency_ros.canbus.loop import ControlLoop
+from transparency_ros.canbus.multi import Motor, MultiControlLoop, RobotSample
 from transparency_ros.canbus.protocol import (
     ActuatorProtocol,
     Feedback,
     MitProtocol,
     MoteusProtocol,
 )
-from transparency_ros.canbus.sim_device import SimulatedActuator
+from transparency_ros.canbus.sim_device import SimulatedActuator, SimulatedBus, SimulatedBuses
 from transparency_ros.core import stamps
 from transparency_ros.core.cdr import encode_joint_state
 from transparency_ros.core.driver import (
@@ -52,8 +53,18 @@ from transparency_ros.core.driver import (
 )
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.ros import in_process
-from transparency_ros.ros.actuator_driver.diagnostics import driver_status, late_message
-from transparency_ros.ros.actuator_driver.hardware import make_protocol, start_simulation
+from transparency_ros.ros.actuator_driver.diagnostics import (
+    driver_status,
+    late_message,
+    robot_statuses,
+)
+from transparency_ros.ros.actuator_driver.hardware import (
+    MotorSpec,
+    make_protocol,
+    motor_specs,
+    start_simulated_buses,
+    start_simulation,
+)
 from transparency_ros.ros.actuator_driver.parameters import (
     DESCRIPTION,
     NODE_NAME,
@@ -87,7 +98,12 @@ class ActuatorDriverNode(LifecycleNode):
         self.protocol: ActuatorProtocol | None = None
         self.client: ActuatorClient | None = None
         self.sim: SimulatedActuator | None = None
-        self.loop: ControlLoop | None = None
+        self.loop: ControlLoop | MultiControlLoop | None = None
+        # several motors (motor_ids): one core each, their specs, the simulated buses
+        self.cores: list[DriverCore] = [self.core]
+        self.specs: list[MotorSpec] = []
+        self.sim_buses: list[SimulatedBus] = []
+        self._sim_runner: SimulatedBuses | None = None
         self._joint_pub: Any = None
         self._command_sub: Any = None
         self._safe_lock = threading.Lock()
@@ -120,7 +136,7 @@ class ActuatorDriverNode(LifecycleNode):
 
     @property
     def configured(self) -> bool:
-        return self.client is not None and self.loop is not None
+        return self.loop is not None
 
     # ----------------------------------------------------------------- parameters
 
@@ -142,18 +158,85 @@ class ActuatorDriverNode(LifecycleNode):
         return SetParametersResult(successful=True)
 
     def _protocol_gain_error(self, settings: DriverSettings) -> str | None:
-        proto = self.protocol
-        if isinstance(proto, MitProtocol):
-            kp = settings.k_s_nm_per_rad / proto.gear_ratio**2
-            kd = settings.k_d_nms_per_rad / proto.gear_ratio**2
-            if kp > proto.limits.kp_max or kd > proto.limits.kd_max:
-                return (
-                    f"k_s/k_d exceed the motor's MIT range kp <= {proto.limits.kp_max}, "
-                    f"kd <= {proto.limits.kd_max}"
-                )
-        if isinstance(proto, MoteusProtocol) and proto.kp_scale(settings.k_s_nm_per_rad) > 1.0:
-            return "k_s exceeds the moteus's configured kp (kp_scale would be > 1)"
+        protocols = (
+            [m.protocol for m in self.loop.motors]
+            if isinstance(self.loop, MultiControlLoop)
+            else [self.protocol]
+        )
+        for proto in protocols:
+            reason = _gain_error(proto, settings)
+            if reason:
+                return reason
         return None
+
+    # ----------------------------------------------------------------- lifecycle
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self.specs = motor_specs(self.values)
+        except ValueError as err:
+            self.get_logger().error(f"configure failed: {err}")
+            return TransitionCallbackReturn.FAILURE
+        if self.specs:
+            return self._configure_motors()
+        return self._configure_one()
+
+    def _configure_motors(self) -> TransitionCallbackReturn:
+        """Several motors in one loop (``canbus.multi``): one bus per channel."""
+        v = self.values
+        buses: list[Any] = []
+        try:
+            pairs = [make_protocol({**v, "motor_id": s.motor_id}) for s in self.specs]
+            protocols = [p for p, _ in pairs]
+            fd = v["fd"] or protocols[0].is_fd
+            if v["simulate"]:
+                self._sim_runner = start_simulated_buses(v, self.specs, [d for _, d in pairs], fd)
+                self.sim_buses = self._sim_runner.buses
+            channels = list(dict.fromkeys(s.channel for s in self.specs))
+            for channel in channels:
+                buses.append(BusSettings(v["interface"], channel, v["bitrate"], fd).open())
+        except (TransparencyError, ValueError) as err:
+            self.get_logger().error(f"configure failed: {err}")
+            for bus in buses:
+                bus.shutdown()
+            self._close()
+            return TransitionCallbackReturn.FAILURE
+        reason = next(filter(None, (_gain_error(p, self.core.settings) for p in protocols)), None)
+        if reason:
+            self.get_logger().error(f"configure failed: {reason}")
+            for bus in buses:
+                bus.shutdown()
+            self._close()
+            return TransitionCallbackReturn.FAILURE
+        self.cores = [DriverCore(self.core.settings) for _ in self.specs]
+        motors = [
+            Motor(s.joint, p, core, bus=channels.index(s.channel))
+            for s, p, core in zip(self.specs, protocols, self.cores, strict=True)
+        ]
+        self.loop = MultiControlLoop(
+            buses,
+            motors,
+            rate_hz=v["publish_rate_hz"],
+            reply_timeout_s=v["reply_timeout_s"],
+            fault_policy=v["fault_policy"],
+            on_sample=self._publish_robot_sample,
+            on_fault=self._on_fault,
+            on_error=self._on_loop_error,
+        )
+        self._create_topics()
+        self.get_logger().info(
+            f"configured: {len(motors)} {v['protocol']} motors "
+            + ", ".join(f"{s.joint}=id {s.motor_id}@{s.channel}" for s in self.specs)
+            + f" on {v['interface']}"
+            + (f", simulated {v['sim_actuator']}s" if v["simulate"] else "")
+        )
+        return TransitionCallbackReturn.SUCCESS
+
+    def _create_topics(self) -> None:
+        self._joint_pub = self.create_lifecycle_publisher(JointState, "/joint_states", 10)
+        self._command_sub = self.create_subscription(
+            JointState, "/joint_commands", self._on_command, 10
+        )
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         for p in params:
@@ -164,12 +247,11 @@ class ActuatorDriverNode(LifecycleNode):
         if changes:
             lock = self.loop.lock if self.loop is not None else threading.RLock()
             with lock:
-                self.core.update_settings(**changes)
+                for core in {id(c): c for c in [self.core, *self.cores]}.values():
+                    core.update_settings(**changes)
             self.get_logger().info(f"applied {', '.join(p.name for p in params)}")
 
-    # ----------------------------------------------------------------- lifecycle
-
-    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+    def _configure_one(self) -> TransitionCallbackReturn:
         v = self.values
         try:
             protocol, personality = make_protocol(v)
@@ -184,7 +266,7 @@ class ActuatorDriverNode(LifecycleNode):
             self.get_logger().error(f"configure failed: {err}")
             self._close()
             return TransitionCallbackReturn.FAILURE
-        reason = self._protocol_gain_error(self.core.settings)
+        reason = _gain_error(protocol, self.core.settings)
         if reason:
             self.get_logger().error(f"configure failed: {reason}")
             self._close()
@@ -198,10 +280,7 @@ class ActuatorDriverNode(LifecycleNode):
             on_fault=self._on_fault,
             on_error=self._on_loop_error,
         )
-        self._joint_pub = self.create_lifecycle_publisher(JointState, "/joint_states", 10)
-        self._command_sub = self.create_subscription(
-            JointState, "/joint_commands", self._on_command, 10
-        )
+        self._create_topics()
         self.get_logger().info(
             f"configured: {v['protocol']} id {v['motor_id']} on {v['interface']}:{v['channel']}"
             + (f" with simulated {v['sim_actuator']}" if v["simulate"] else "")
@@ -210,12 +289,14 @@ class ActuatorDriverNode(LifecycleNode):
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         assert self.loop is not None
-        if self.loop.enable() is None:
-            self.get_logger().error("activate failed: the motor did not answer enable")
+        silent = self._enable()
+        if silent:
+            self.get_logger().error(f"activate failed: no answer to enable from {silent}")
             self.loop.disable()
             return TransitionCallbackReturn.FAILURE
         self.loop.start()
-        self.get_logger().info("active: motor enabled, loop running")
+        motors = "motor" if isinstance(self.loop, ControlLoop) else f"{len(self.cores)} motors"
+        self.get_logger().info(f"active: {motors} enabled, loop running")
         return super().on_activate(state)
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -235,6 +316,14 @@ class ActuatorDriverNode(LifecycleNode):
         self.make_safe()
         return TransitionCallbackReturn.SUCCESS
 
+    def _enable(self) -> str:
+        """Enable the motor(s); the ones that did not answer, or ''."""
+        loop = self.loop
+        if isinstance(loop, MultiControlLoop):
+            return ", ".join(loop.enable())
+        assert loop is not None
+        return "" if loop.enable() is not None else self.values["joint_name"]
+
     def _stop_and_disable(self) -> None:
         if self.loop is not None:
             self.loop.stop()
@@ -248,10 +337,19 @@ class ActuatorDriverNode(LifecycleNode):
         if self._joint_pub is not None:
             self.destroy_lifecycle_publisher(self._joint_pub)
             self._joint_pub = None
+        if isinstance(self.loop, MultiControlLoop):
+            self.loop.close()
         if self.client is not None:
             self.client.close()
             self.client = None
             self.protocol = None
+        if self._sim_runner is not None:
+            time.sleep(0.01)
+            self._sim_runner.stop()
+            self._sim_runner = None
+            left = [p.is_enabled() for sim in self.sim_buses for p in sim.personalities]
+            _exit_logger().info(f"simulated motors enabled at exit: {sum(left)} of {len(left)}")
+            self.sim_buses = []
         if self.sim is not None:
             time.sleep(0.01)  # let the device take the last frames
             self.sim.stop()
@@ -289,7 +387,60 @@ class ActuatorDriverNode(LifecycleNode):
         )
         # serialized here (cheaper than rclpy's message objects), and handed directly to an
         # estimator composed into this process (ros.in_process)
-        in_process.publish(pub, self.context, "/joint_states", data)
+        self._publish_states(pub, data)
+
+    def _publish_states(self, pub: Any, data: bytes) -> None:
+        """Publish from the hardware thread; a signal may shut the context down meanwhile (the
+        loop is being stopped then, and the motors disabled): that sample is dropped quietly."""
+        try:
+            in_process.publish(pub, self.context, "/joint_states", data)
+        except _rclpy.RCLError:
+            if self.context.ok():
+                raise
+
+    def _publish_robot_sample(self, sample: RobotSample) -> None:
+        pub, loop = self._joint_pub, self.loop
+        if pub is None or not isinstance(loop, MultiControlLoop):
+            return
+        sec, nanosec = stamps.split(stamps.from_seconds(self._ros_seconds_at(sample.stamp_s)))
+        data = encode_joint_state(
+            sec,
+            nanosec,
+            "",
+            [loop.motors[i].name for i in sample.indices],
+            position=[fb.position_rad for fb in sample.feedback],
+            velocity=[fb.velocity_rad_s for fb in sample.feedback],
+            effort=[fb.torque_nm for fb in sample.feedback],
+        )
+        self._publish_states(pub, data)
+
+    def _on_motors_command(self, msg: JointState, now: float) -> None:
+        """A command for several motors: by name, all or nothing (one bad joint rejects the
+        message); joints of other drivers are ignored, motors not named keep their target."""
+        loop = self.loop
+        assert isinstance(loop, MultiControlLoop)
+        named = [m for m in loop.motors if m.name in msg.name]
+        try:
+            if not msg.name:
+                raise CommandRejectedError("commands for several motors need joint names")
+            if not named:
+                raise CommandRejectedError(
+                    f"none of {[m.name for m in loop.motors]} in command names {list(msg.name)}"
+                )
+            targets = [
+                parse_joint_command(m.name, msg.name, msg.position, msg.velocity, msg.effort)
+                for m in named
+            ]
+        except CommandRejectedError as err:
+            with loop.lock:
+                for motor in named or loop.motors:
+                    motor.core.reject(str(err))
+            self._warn_throttled(f"rejected /joint_commands: {err}")
+            return
+        with loop.lock:
+            clamped = [m.core.set_target(t, now) for m, t in zip(named, targets, strict=True)]
+        if any(clamped):
+            self._warn_throttled("command clamped to the configured limits")
 
     def _on_command(self, msg: JointState) -> None:
         now = time.monotonic()
@@ -300,6 +451,9 @@ class ActuatorDriverNode(LifecycleNode):
             age = now - self._to_ros.back(stamp)
             if 0.0 <= age < 1.0:
                 now -= age
+        if isinstance(self.loop, MultiControlLoop):
+            self._on_motors_command(msg, now)
+            return
         try:
             target = parse_joint_command(
                 self.values["joint_name"], msg.name, msg.position, msg.velocity, msg.effort
@@ -334,10 +488,15 @@ class ActuatorDriverNode(LifecycleNode):
     # ----------------------------------------------------------------- services
 
     def _on_set_zero(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        if self.loop is None:
+        loop = self.loop
+        if loop is None:
             response.success, response.message = False, "not configured"
+        elif isinstance(loop, MultiControlLoop):
+            silent = loop.set_zero()
+            response.success = not silent
+            response.message = f"no reply from {silent}" if silent else "positions are now zero"
         else:
-            response.success = self.loop.set_zero()
+            response.success = loop.set_zero()
             response.message = "position is now zero" if response.success else "no reply"
         return response
 
@@ -346,10 +505,13 @@ class ActuatorDriverNode(LifecycleNode):
         if loop is None:
             response.success, response.message = False, "not configured"
         elif request.data:
-            response.success = loop.enable() is not None
+            silent = self._enable()
+            response.success = not silent
             if response.success:
                 loop.start()
-            response.message = "enabled" if response.success else "the motor did not answer"
+            else:
+                loop.disable()
+            response.message = "enabled" if response.success else f"no answer from {silent}"
         else:
             loop.disable()
             response.success, response.message = True, "zero torque, motor mode off"
@@ -368,10 +530,31 @@ class ActuatorDriverNode(LifecycleNode):
         return late_message(late, replies, self.values["reply_timeout_s"])
 
     def publish_diagnostics(self) -> None:
-        status = driver_status(self.values, self.core, self.client, self.loop, self._late_in_period)
-        array = DiagnosticArray(status=[status])
+        loop = self.loop
+        if isinstance(loop, MultiControlLoop):
+            statuses = robot_statuses(self.values, loop, self.specs)
+        else:
+            statuses = [
+                driver_status(self.values, self.core, self.client, loop, self._late_in_period)
+            ]
+        array = DiagnosticArray(status=statuses)
         array.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(array)
+
+
+def _gain_error(proto: ActuatorProtocol | None, settings: DriverSettings) -> str | None:
+    """Why the gains cannot be sent to this protocol's device, or None."""
+    if isinstance(proto, MitProtocol):
+        kp = settings.k_s_nm_per_rad / proto.gear_ratio**2
+        kd = settings.k_d_nms_per_rad / proto.gear_ratio**2
+        if kp > proto.limits.kp_max or kd > proto.limits.kd_max:
+            return (
+                f"k_s/k_d exceed the motor's MIT range kp <= {proto.limits.kp_max}, "
+                f"kd <= {proto.limits.kd_max}"
+            )
+    if isinstance(proto, MoteusProtocol) and proto.kp_scale(settings.k_s_nm_per_rad) > 1.0:
+        return "k_s exceeds the moteus's configured kp (kp_scale would be > 1)"
+    return None
 
 
 def _exit_logger() -> Any:

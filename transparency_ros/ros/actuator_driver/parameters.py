@@ -55,6 +55,33 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         high=1e3,
     ),
     P("joint_name", "joint", "name in JointState messages", read_only=True),
+    P(
+        "motor_ids",
+        [-1],
+        "several motors in one loop: their ids (one /joint_states with all of them; per-motor "
+        "watchdogs); [-1]: the one motor of motor_id and joint_name",
+        read_only=True,
+    ),
+    P(
+        "joint_names",
+        [""],
+        "with motor_ids: one joint name per motor ([''] : joint_<id>)",
+        read_only=True,
+    ),
+    P(
+        "channels",
+        [""],
+        "with motor_ids: the bus channel of each motor ([''] : all on channel); every bus "
+        "speaks the one protocol",
+        read_only=True,
+    ),
+    P(
+        "fault_policy",
+        "all",
+        "with motor_ids: when one motor faults, disable all motors or only that motor",
+        read_only=True,
+        choices=("all", "motor"),
+    ),
     P("simulate", True, "attach the simulated actuator to the (virtual) bus", read_only=True),
     P(
         "sim_actuator",
@@ -135,7 +162,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     P(
         "reply_timeout_s",
         0.0005,
-        "wait for a reply per cycle [s] (capped at 0.9 period)",
+        "wait for a reply per cycle [s] (capped at 0.9 period); with motor_ids, per motor of "
+        "the busiest bus",
         read_only=True,
         low=1e-5,
         high=1.0,
@@ -230,8 +258,9 @@ def settings_value(name: str, value: Any) -> Any:
 
 
 DESCRIPTION = (
-    "Drive one CAN actuator (MIT mode, ODrive CANSimple or moteus) and publish its state on "
-    "/joint_states; follow /joint_commands with an impedance law. Lifecycle node; with "
+    "Drive one CAN actuator (MIT mode, ODrive CANSimple or moteus), or several with motor_ids, "
+    "and publish their state on /joint_states; follow /joint_commands with an impedance law. "
+    "Lifecycle node; with "
     "autostart it configures and activates itself. Services: ~/set_zero (std_srvs/Trigger), "
     "~/enable (std_srvs/SetBool). Default: a simulated U10DD on a virtual bus."
 )

@@ -1,0 +1,220 @@
+"""Several motors in one loop (canbus.multi) against simulated devices sharing virtual buses."""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import pytest
+
+from transparency_ros.canbus.client import BusSettings
+from transparency_ros.canbus.multi import Motor, MultiControlLoop, RobotSample
+from transparency_ros.canbus.protocol import (
+    ActuatorProtocol,
+    MitProtocol,
+    MoteusProtocol,
+    ODriveProtocol,
+)
+from transparency_ros.canbus.sim_device import (
+    MitDevice,
+    MoteusDevice,
+    ODriveDevice,
+    Personality,
+    SimulatedBus,
+    SimulatedBuses,
+)
+from transparency_ros.core.actuator_physics import ActuatorPhysics, PhysicsParams
+from transparency_ros.core.config import get_actuator
+from transparency_ros.core.driver import DriverCore, DriverMode, DriverSettings, JointTarget
+from transparency_ros.ros.actuator_driver.hardware import ROBOT_SIM_STEP_S
+
+_channels = itertools.count()
+
+
+def make(name: str, motor_id: int) -> tuple[ActuatorProtocol, Personality]:
+    if name == "mit":
+        return MitProtocol(motor_id), MitDevice(motor_id)
+    if name == "odrive":
+        return ODriveProtocol(motor_id), ODriveDevice(motor_id)
+    return MoteusProtocol(motor_id), MoteusDevice(motor_id)
+
+
+@dataclass
+class Robot:
+    loop: MultiControlLoop
+    sims: list[SimulatedBus]
+    samples: list[RobotSample]
+    faults: list[str]
+    runner: SimulatedBuses
+
+    def sim_of(self, index: int) -> tuple[SimulatedBus, int]:
+        """The simulated bus and device index of motor ``index``."""
+        bus = self.loop.motors[index].bus
+        on_bus = [i for i, m in enumerate(self.loop.motors) if m.bus == bus]
+        return self.sims[bus], on_bus.index(index)
+
+
+def build(protocol: str, ids: list[int], buses: int = 1, policy: str = "all") -> Robot:
+    per_bus = [ids[b::buses] for b in range(buses)]
+    motors: list[Motor] = []
+    sims, opened = [], []
+    for b, bus_ids in enumerate(per_bus):
+        settings = BusSettings(channel=f"multi_{next(_channels)}", fd=protocol == "moteus")
+        devices = []
+        for motor_id in bus_ids:
+            host, device = make(protocol, motor_id)
+            physics = ActuatorPhysics(
+                PhysicsParams.from_actuator(get_actuator("U10DD")), max_step_s=ROBOT_SIM_STEP_S
+            )
+            devices.append((physics, device))
+            core = DriverCore(DriverSettings(max_missed_replies=4))
+            motors.append(Motor(f"j{motor_id}", host, core, bus=b))
+        sims.append(SimulatedBus(devices, settings))
+        opened.append(settings.open())
+    runner = SimulatedBuses(sims).start()  # one thread for all buses, as the node runs them
+    robot = Robot(None, sims, [], [], runner)  # type: ignore[arg-type]
+    robot.loop = MultiControlLoop(
+        opened, motors, rate_hz=500.0, reply_timeout_s=0.0018, fault_policy=policy,
+        on_sample=robot.samples.append, on_fault=robot.faults.append,
+    )  # fmt: skip
+    return robot
+
+
+@pytest.fixture
+def robot(request: pytest.FixtureRequest) -> Iterator[Robot]:
+    protocol, ids, buses, policy = request.param
+    robot = build(protocol, ids, buses, policy)
+    yield robot
+    robot.loop.stop()
+    robot.loop.disable()
+    robot.loop.close()
+    robot.runner.stop()
+    assert not any(any(sim.enabled()) for sim in robot.sims), "a motor was left enabled"
+
+
+def wait_for(condition, timeout_s: float = 3.0) -> bool:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+@pytest.mark.parametrize(
+    "robot",
+    [("mit", [1, 2, 3], 1, "all"), ("odrive", [3, 4, 5], 1, "all"),
+     ("moteus", [1, 2, 3], 1, "all"), ("mit", [1, 2, 3, 4, 5, 6], 2, "all")],
+    indirect=True, ids=["mit", "odrive", "moteus", "mit-two-buses"],
+)  # fmt: skip
+def test_every_motor_follows_its_own_target(robot: Robot) -> None:
+    loop = robot.loop
+    assert loop.enable() == []
+    loop.start()  # (moteus enters position mode with the first command)
+    assert wait_for(lambda: all(all(sim.enabled()) for sim in robot.sims))
+    targets = [0.1 * (i + 1) * (-1) ** i for i in range(len(loop.motors))]
+    with loop.lock:
+        for motor, target in zip(loop.motors, targets, strict=True):
+            motor.core.set_target(JointTarget(target), time.monotonic())
+
+    def settled() -> bool:
+        last = robot.samples[-1] if robot.samples else None
+        if last is None or len(last.indices) != len(loop.motors):
+            return False
+        return all(abs(fb.position_rad - targets[i]) < 0.03
+                   for i, fb in zip(last.indices, last.feedback, strict=True))  # fmt: skip
+
+    assert wait_for(settled, 5.0), robot.samples[-1] if robot.samples else "no samples"
+    stamps = [s.stamp_s for s in robot.samples]
+    assert all(b > a for a, b in itertools.pairwise(stamps))
+    assert robot.faults == []
+    loop.stop()
+    loop.disable()
+    assert not any(any(sim.enabled()) for sim in robot.sims)
+
+
+@pytest.mark.parametrize(
+    "robot", [("mit", [1, 2, 3], 1, "all"), ("mit", [1, 2, 3], 1, "motor")],
+    indirect=True, ids=["policy-all", "policy-motor"],
+)  # fmt: skip
+def test_a_silent_motor_trips_its_own_watchdog(robot: Robot) -> None:
+    loop = robot.loop
+    assert loop.enable() == []
+    loop.start()
+    sim, device = robot.sim_of(1)
+    sim.silence(device)
+    assert wait_for(lambda: loop.motors[1].core.mode is DriverMode.FAULT)
+    assert wait_for(lambda: len(robot.faults) >= 1)
+    assert robot.faults[0].startswith("j2: ")
+    assert not sim.personalities[device].is_enabled(), "the silent motor was not sent disable"
+    others = [loop.motors[i].core.mode for i in (0, 2)]
+    if loop.fault_policy == "all":
+        assert others == [DriverMode.FAULT] * 2
+        assert wait_for(lambda: not any(sim.enabled()))
+    else:
+        assert others == [DriverMode.ACTIVE] * 2
+        time.sleep(0.1)
+        last = robot.samples[-1]
+        assert last.indices == (0, 2), "the others keep being published"
+        assert sim.enabled() == [True, False, True]
+
+
+@pytest.mark.parametrize("robot", [("mit", [1, 2], 1, "all")], indirect=True)
+def test_enable_names_the_motor_that_does_not_answer(robot: Robot) -> None:
+    sim, device = robot.sim_of(1)
+    sim.silence(device)
+    assert robot.loop.enable(timeout_s=0.05) == ["j2"]
+    assert robot.loop.motors[1].core.mode is DriverMode.FAULT
+    robot.loop.disable()
+    assert not any(sim.enabled())
+
+
+@pytest.mark.parametrize("robot", [("mit", [1, 2], 1, "all")], indirect=True)
+def test_an_error_inside_the_loop_disables_every_motor(robot: Robot) -> None:
+    loop = robot.loop
+    errors: list[BaseException] = []
+    loop.on_error = errors.append
+    assert loop.enable() == []
+    loop.on_sample = lambda _s: (_ for _ in ()).throw(RuntimeError("subscriber blew up"))
+    loop.start()
+    assert wait_for(lambda: bool(errors))
+    assert all(m.core.mode is DriverMode.FAULT for m in loop.motors)
+    assert wait_for(lambda: not any(robot.sims[0].enabled()))
+
+
+@pytest.mark.parametrize("robot", [("mit", [1, 2, 3], 1, "all")], indirect=True)
+def test_set_zero_zeroes_every_motor(robot: Robot) -> None:
+    loop = robot.loop
+    assert loop.enable() == []
+    loop.start()
+    with loop.lock:
+        for motor in loop.motors:
+            motor.core.set_target(JointTarget(0.5), time.monotonic())
+    assert wait_for(lambda: bool(robot.samples) and min(
+        fb.position_rad for fb in robot.samples[-1].feedback) > 0.45)  # fmt: skip
+    assert loop.set_zero() == []
+    robot.samples.clear()
+    assert wait_for(lambda: len(robot.samples) > 20)
+    assert all(abs(fb.position_rad) < 0.03 for fb in robot.samples[-1].feedback)
+
+
+def test_bad_configurations_are_refused() -> None:
+    core = DriverCore(DriverSettings())
+    bus = BusSettings(channel=f"multi_{next(_channels)}").open()
+    try:
+        twins = [Motor("a", MitProtocol(1), core), Motor("a", MitProtocol(2), core)]
+        with pytest.raises(ValueError, match="unique"):
+            MultiControlLoop([bus], twins, rate_hz=1000, reply_timeout_s=1e-3)
+        same_id = [Motor("a", MitProtocol(1), core), Motor("b", MitProtocol(0x101), core)]
+        with pytest.raises(ValueError, match="same id"):
+            MultiControlLoop([bus], same_id, rate_hz=1000, reply_timeout_s=1e-3)
+        with pytest.raises(ValueError, match="fault_policy"):
+            MultiControlLoop([bus], [Motor("a", MitProtocol(1), core)], rate_hz=1000,
+                             reply_timeout_s=1e-3, fault_policy="some")  # fmt: skip
+        with pytest.raises(ValueError, match="bus 1 has no motor"):
+            MultiControlLoop([bus, bus], [Motor("a", MitProtocol(1), core)], rate_hz=1000,
+                             reply_timeout_s=1e-3)  # fmt: skip
+    finally:
+        bus.shutdown()
