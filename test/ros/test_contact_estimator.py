@@ -313,6 +313,45 @@ def test_with_the_driver_the_event_stamp_is_a_joint_state_stamp(
         rig.close()
 
 
+@pytest.mark.parametrize("in_process", [False, True], ids=["through DDS", "in-process"])
+def test_a_robot_driver_with_three_motors_feeds_one_estimator(
+    ros_context: Context, in_process: bool
+) -> None:
+    """One driver process for three motors (issue 18) and one estimator: a step on the knee is
+    a contact on the knee only, stamped with a sample of the driver's one /joint_states."""
+    joints = ["hip", "knee", "ankle"]
+    driver = ActuatorDriverNode(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter("channel", value=f"estimator_robot_{next(_channels)}"),
+            Parameter("motor_ids", value=[1, 2, 3]),
+            Parameter("joint_names", value=joints),
+            Parameter("publish_rate_hz", value=250.0),
+            Parameter("command_timeout_s", value=5.0),
+        ],
+    )
+    rig = Rig(ros_context, contact_onset_rad=0.1, contact_release_rad=0.05, in_process=in_process)
+    driver_states: list[float] = []
+    rig.probe.create_subscription(
+        JointState, "/joint_states", lambda m: driver_states.append(stamp_of(m)), 1000
+    )
+    extra = Spinner(ros_context, driver)
+    try:
+        assert wait_for(lambda: len(driver_states) > 20)
+        rig.commands_pub.publish(JointState(name=joints, position=[0.0, 0.5, 0.0]))
+        assert wait_for(lambda: len(rig.contacts) >= 1)
+        time.sleep(0.3)
+        assert [c.header.frame_id for c in rig.contacts] == ["knee"]
+        onset = stamp_of(rig.contacts[0])
+        assert wait_for(lambda: min(abs(onset - s) for s in driver_states) < 1e-9)
+        assert wait_for(lambda: any(r.header.frame_id == "knee" for r in rig.releases), 5.0)
+    finally:
+        driver.make_safe()
+        extra.stop()
+        driver.destroy_node()
+        rig.close()
+
+
 def test_a_burst_beyond_the_queue_is_counted_as_lost(rig_factory: Any) -> None:
     """A slow moment of the estimator during a burst: DDS keeps only queue_depth samples and
     drops the rest silently; the publication sequence numbers count every one of them."""
