@@ -501,3 +501,22 @@ def test_several_motors_process_exits_with_every_motor_disabled(ros_context: Con
         probe.node.destroy_node()
     assert proc.returncode == 0, output
     assert "simulated motors enabled at exit: 0 of 4" in output
+
+
+def test_every_motor_has_its_own_runtime_parameters(driver_factory: Any) -> None:
+    """knee.k_s and friends: per joint at start (a YAML's nested keys) and at runtime; the
+    global ones are refused with motor_ids, naming the per-joint ones."""
+    node, probe = driver_factory("mit", **motors([1, 2, 3], **{"knee.k_s": 6.0}))
+    assert [c.settings.k_s_nm_per_rad for c in node.cores] == [2.0, 6.0, 2.0]
+    results = probe.set_params(**{"ankle.k_s": 4.0})
+    assert results[0].successful, results[0].reason
+    assert wait_for(lambda: node.cores[2].settings.k_s_nm_per_rad == 4.0, 2.0)
+    results = probe.set_params(k_s=3.0)
+    assert not results[0].successful and "hip.k_s" in results[0].reason
+    results = probe.set_params(**{"hip.position_min_rad": 20.0})
+    assert not results[0].successful and results[0].reason.startswith("hip: ")
+    results = probe.set_params(**{"hip.k_s": 900.0})  # beyond the MIT kp range
+    assert not results[0].successful and "MIT range" in results[0].reason
+    assert [c.settings.k_s_nm_per_rad for c in node.cores] == [2.0, 6.0, 4.0]
+    bad, _ = driver_factory("mit", motor_ids=[1, 2], joint_names=["mit", "a.b"])
+    assert not bad.configured

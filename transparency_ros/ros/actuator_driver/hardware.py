@@ -52,6 +52,12 @@ def motor_specs(v: dict[str, Any]) -> list[MotorSpec]:
         raise ValueError(f"motor_ids has duplicates: {ids}")
     names = list(v["joint_names"])
     names = [f"joint_{i}" for i in ids] if names == [""] else names
+    reserved = [n for n in names if "." in n or n in ("mit", "moteus")]
+    if reserved:
+        raise ValueError(
+            f"joint_names {reserved}: a joint name is a parameter prefix (knee.k_s) and may "
+            "not contain '.' or be 'mit' or 'moteus'"
+        )
     if len(names) != len(ids) or any(not n for n in names) or len(set(names)) != len(names):
         raise ValueError(
             f"joint_names must be {len(ids)} distinct non-empty names (one per motor_ids "

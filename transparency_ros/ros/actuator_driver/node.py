@@ -11,6 +11,7 @@ path (Ctrl-C, SIGTERM, an exception, lifecycle shutdown, interpreter exit) ends 
 from __future__ import annotations
 
 import atexit
+import contextlib
 import math
 import sys
 import threading
@@ -95,6 +96,16 @@ class ActuatorDriverNode(LifecycleNode):
         self.core = DriverCore(DriverSettings(**{
             field: settings_value(name, self.values[name]) for name, field in RUNTIME.items()
         }))  # fmt: skip
+        # several motors: every runtime parameter per joint, "<joint>.k_s" (default: the global)
+        self.joint_names: list[str] = []
+        with contextlib.suppress(ValueError):  # a bad list is reported by configure
+            self.joint_names = [spec.joint for spec in motor_specs(self.values)]
+        for joint in self.joint_names:
+            self.values.update(declare(self, [
+                replace(spec, name=f"{joint}.{spec.name}", default=self.values[spec.name],
+                        description=f"{joint}: {spec.description}")
+                for spec in PARAMETERS if spec.name in RUNTIME
+            ]))  # fmt: skip
         self.protocol: ActuatorProtocol | None = None
         self.client: ActuatorClient | None = None
         self.sim: SimulatedActuator | None = None
@@ -140,26 +151,57 @@ class ActuatorDriverNode(LifecycleNode):
 
     # ----------------------------------------------------------------- parameters
 
+    def _joint_param(self, name: str) -> tuple[str, str] | None:
+        """(joint, runtime parameter) for a per-joint name such as "knee.k_s", else None."""
+        joint, _, base = name.rpartition(".")
+        return (joint, base) if joint in self.joint_names and base in RUNTIME else None
+
+    def joint_settings(self, joint: str) -> DriverSettings:
+        """A joint's driver settings from its per-joint parameters."""
+        try:
+            return replace(self.core.settings, **{
+                field: settings_value(name, self.values[f"{joint}.{name}"])
+                for name, field in RUNTIME.items()
+            }).validated()  # fmt: skip
+        except SettingsError as err:
+            raise SettingsError(f"{joint}: {err}") from None
+
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        changes = {}
+        changes: dict[str | None, dict[str, Any]] = {}  # joint (None: all) -> settings changes
         for param in params:
-            reason = choice_error(PARAMETERS, param.name, param.value)
+            per_joint = self._joint_param(param.name)
+            base = per_joint[1] if per_joint else param.name
+            reason = choice_error(PARAMETERS, base, param.value)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
-            if param.name in RUNTIME:
-                changes[RUNTIME[param.name]] = settings_value(param.name, param.value)
-        try:
-            trial = replace(self.core.settings, **changes).validated()
-        except (SettingsError, ValueError) as err:
-            return SetParametersResult(successful=False, reason=str(err))
-        reason = self._protocol_gain_error(trial)
-        if reason:
-            return SetParametersResult(successful=False, reason=reason)
+            if param.name in RUNTIME and self.joint_names:
+                return SetParametersResult(successful=False, reason=(
+                    f"with motor_ids, {param.name} is set per joint: "
+                    + ", ".join(f"{j}.{param.name}" for j in self.joint_names)))  # fmt: skip
+            if base in RUNTIME:
+                joint = per_joint[0] if per_joint else None
+                changes.setdefault(joint, {})[RUNTIME[base]] = settings_value(base, param.value)
+        for joint, change in changes.items():
+            current = self.core.settings if joint is None else self._current_settings(joint)
+            try:
+                trial = replace(current, **change).validated()
+            except (SettingsError, ValueError) as err:
+                where = f"{joint}: " if joint else ""
+                return SetParametersResult(successful=False, reason=where + str(err))
+            reason = self._protocol_gain_error(trial, joint)
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
-    def _protocol_gain_error(self, settings: DriverSettings) -> str | None:
+    def _current_settings(self, joint: str) -> DriverSettings:
+        loop = self.loop
+        if isinstance(loop, MultiControlLoop):
+            return next(m.core.settings for m in loop.motors if m.name == joint)
+        return self.joint_settings(joint)
+
+    def _protocol_gain_error(self, settings: DriverSettings, joint: str | None) -> str | None:
         protocols = (
-            [m.protocol for m in self.loop.motors]
+            [m.protocol for m in self.loop.motors if m.name == joint or joint is None]
             if isinstance(self.loop, MultiControlLoop)
             else [self.protocol]
         )
@@ -201,14 +243,22 @@ class ActuatorDriverNode(LifecycleNode):
                 bus.shutdown()
             self._close()
             return TransitionCallbackReturn.FAILURE
-        reason = next(filter(None, (_gain_error(p, self.core.settings) for p in protocols)), None)
+        reason: str | None = None
+        try:
+            settings = [self.joint_settings(s.joint) for s in self.specs]
+        except (SettingsError, ValueError) as err:
+            settings, reason = [], f"{err}"
+        else:
+            reason = next(
+                (f"{s.joint}: {r}" for s, p, c in zip(self.specs, protocols, settings, strict=True)
+                 if (r := _gain_error(p, c))), None)  # fmt: skip
         if reason:
             self.get_logger().error(f"configure failed: {reason}")
             for bus in buses:
                 bus.shutdown()
             self._close()
             return TransitionCallbackReturn.FAILURE
-        self.cores = [DriverCore(self.core.settings) for _ in self.specs]
+        self.cores = [DriverCore(c) for c in settings]
         motors = [
             Motor(s.joint, p, core, bus=channels.index(s.channel))
             for s, p, core in zip(self.specs, protocols, self.cores, strict=True)
@@ -244,11 +294,18 @@ class ActuatorDriverNode(LifecycleNode):
         changes = {
             RUNTIME[p.name]: settings_value(p.name, p.value) for p in params if p.name in RUNTIME
         }
-        if changes:
-            lock = self.loop.lock if self.loop is not None else threading.RLock()
-            with lock:
-                for core in {id(c): c for c in [self.core, *self.cores]}.values():
-                    core.update_settings(**changes)
+        lock = self.loop.lock if self.loop is not None else threading.RLock()
+        with lock:
+            if changes:
+                self.core.update_settings(**changes)
+            loop = self.loop
+            for p in params:
+                per_joint = self._joint_param(p.name)
+                if per_joint and isinstance(loop, MultiControlLoop):
+                    joint, base = per_joint
+                    core = next(m.core for m in loop.motors if m.name == joint)
+                    core.update_settings(**{RUNTIME[base]: settings_value(base, p.value)})
+        if changes or any(self._joint_param(p.name) for p in params):
             self.get_logger().info(f"applied {', '.join(p.name for p in params)}")
 
     def _configure_one(self) -> TransitionCallbackReturn:
