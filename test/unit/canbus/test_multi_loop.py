@@ -148,7 +148,8 @@ def test_a_silent_motor_trips_its_own_watchdog(robot: Robot) -> None:
     assert wait_for(lambda: loop.motors[1].core.mode is DriverMode.FAULT)
     assert wait_for(lambda: len(robot.faults) >= 1)
     assert robot.faults[0].startswith("j2: ")
-    assert not sim.personalities[device].is_enabled(), "the silent motor was not sent disable"
+    silent = sim.personalities[device]
+    assert wait_for(lambda: not silent.is_enabled()), "the silent motor was not sent disable"
     others = [loop.motors[i].core.mode for i in (0, 2)]
     if loop.fault_policy == "all":
         assert others == [DriverMode.FAULT] * 2
