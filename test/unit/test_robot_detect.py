@@ -13,7 +13,13 @@ import pytest
 
 from transparency_ros.analysis import robot_detect as rd
 from transparency_ros.analysis.robot_calibration import calibrate
-from transparency_ros.analysis.robot_data import Columns, JointRecording, read_joint_csv
+from transparency_ros.analysis.robot_data import (
+    Columns,
+    JointRecording,
+    read_joint_bag,
+    read_joint_csv,
+    write_joint_bag,
+)
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.robot_calibration import Calibration
 from transparency_ros.core.robot_model import RobotModel
@@ -177,42 +183,18 @@ def test_calibrate_and_detect_on_the_real_double_pendulum_from_the_command_line(
     assert "--method momentum_observer needs --calibration" in capsys.readouterr().err
 
 
-def write_bag(path: Path, rec: JointRecording, base_ns: int = 1_800_000_000 * 10**9) -> Path:
-    """A robot's run as a driver and a controller would record it: /joint_states, then the
-    command computed from it on /joint_commands (effort)."""
-    from transparency_ros.bag.writer import BagWriter, message_types, time_msg  # noqa: PLC0415
-
-    types = message_types()
-
-    def joint_state(ns: int, **arrays: np.ndarray) -> object:
-        header = types["std_msgs/msg/Header"](stamp=time_msg(ns), frame_id="")
-        empty = np.empty(0)
-        fields = {k: arrays.get(k, empty) for k in ("position", "velocity", "effort")}
-        return types["sensor_msgs/msg/JointState"](header=header, name=list(rec.joints), **fields)
-
-    with BagWriter(path) as bag:
-        bag.add("/joint_states", "sensor_msgs/msg/JointState")
-        bag.add("/joint_commands", "sensor_msgs/msg/JointState")
-        for k, stamp in enumerate(rec.stamps_ns):
-            ns = base_ns + int(stamp)
-            state = joint_state(ns, position=rec.position[k], velocity=rec.velocity[k])
-            bag.write_message("/joint_states", ns, state)
-            bag.write_message("/joint_commands", ns + 1, joint_state(ns, effort=rec.torque[k]))
-    return path
-
-
 def test_calibrate_and_detect_read_bags_of_states_and_commands(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The same simulated chain recorded as bags (/joint_states and /joint_commands' efforts):
     read back exactly, calibrated on two, and the pushes of a third are detected."""
-    from transparency_ros.analysis.robot_data import read_joint_bag  # noqa: PLC0415
     from transparency_ros.cli import main  # noqa: PLC0415
 
     truth = RobotModel.from_urdf(chain_urdf(2, mass=0.65))
     runs = [simulated(truth, 4.0, phase, []) for phase in (0.0, 1.0)]
     runs.append(simulated(truth, 4.0, 0.5, [(0, 1.0), (1, 2.5)]))
-    bags = [write_bag(tmp_path / f"run{k}", r) for k, r in enumerate(runs)]
+    epoch = 1_800_000_000 * 10**9  # a robot's clock
+    bags = [write_joint_bag(tmp_path / f"run{k}", r, start_ns=epoch) for k, r in enumerate(runs)]
     back = read_joint_bag(bags[2], ["j0", "j1"])
     assert back.stamps_ns.tolist() == runs[2].stamps_ns.tolist()
     assert np.array_equal(back.position, runs[2].position)
@@ -230,3 +212,66 @@ def test_calibrate_and_detect_read_bags_of_states_and_commands(
     assert float(onsets["run2 j1"].split(",")[0]) == pytest.approx(2.5, abs=0.05)
     with pytest.raises(ConfigError, match=r"/joint_states has no joint \['j9'\]"):
         read_joint_bag(bags[0], ["j0", "j9"])
+
+
+def test_import_csv_of_several_joints_writes_bags_that_detect_reads_as_the_csv(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The lab's CSVs imported as a robot's bags (/joint_states, /joint_commands,
+    /true_external_effort): read back, every column is the CSV's, and calibrate and detect
+    print the same on the bags as on the CSVs."""
+    from transparency_ros.cli import main  # noqa: PLC0415
+
+    csvs = [str(SHARED / f"pendubot_{n}.csv.xz") for n in ("clean_01", "pert_01")]
+    out = tmp_path / "bags"
+    assert main(["import-csv", *csvs, "--out", str(out), "--joints", "Joint1,Joint2"]) == 0
+    printed = capsys.readouterr().out
+    assert "pendubot_pert_01  (" in printed and "with measured, labels)" in printed
+    assert "pendubot_clean_01  (" in printed and "with measured, desired)" in printed
+    joints = ["Joint1", "Joint2"]
+    columns = Columns(measured="tau_meas{}")
+    for name in ("clean_01", "pert_01"):
+        csv = read_joint_csv(SHARED / f"pendubot_{name}.csv.xz", joints, columns)
+        bag = read_joint_bag(out / f"pendubot_{name}", joints, "/true_external_effort")
+        assert bag.name == csv.name
+        assert bag.stamps_ns.tolist() == csv.stamps_ns.tolist()
+        for field in ("position", "velocity", "torque", "measured", "desired", "label"):
+            mine, theirs = getattr(bag, field), getattr(csv, field)
+            assert (mine is None) == (theirs is None), field
+            assert mine is None or np.array_equal(mine, theirs), field
+    urdf = str(SHARED / "pendubot.urdf")
+    lines = []
+    for clean, pert in ((csvs[0], csvs[1]), *[[str(out / f"pendubot_{n}") for n in
+                                               ("clean_01", "pert_01")]]):  # fmt: skip
+        cal = str(tmp_path / "cal.yaml")
+        assert main(["calibrate", clean, "--urdf", urdf, "--out", cal]) == 0
+        args = ["detect", pert, "--urdf", urdf, "--calibration", cal, "--labels", "tau_pert{}"]
+        assert main(args) == 0
+        lines.append(capsys.readouterr().out.replace(cal, "").splitlines())
+        (tmp_path / "cal.yaml").unlink()
+    assert lines[0] == lines[1]
+    assert any("pulses found" in line for line in lines[0])
+
+
+def test_import_csv_of_several_joints_refuses_bad_input_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from transparency_ros.cli import main  # noqa: PLC0415
+
+    good = str(SHARED / "pendubot_pert_01.csv.xz")
+    bad = tmp_path / "three.csv"
+    bad.write_text("time,pos_meas1,vel_meas1,tau_con1\n0,0,0,0\n0.002,0,0,nan\n")
+    out = tmp_path / "bags"
+    assert main(["import-csv", good, str(bad), "--out", str(out), "--joints", "a,b"]) == 2
+    assert "three.csv: no column 'pos_meas2'" in capsys.readouterr().err
+    assert not out.exists() or not any(out.iterdir())  # not even the good file's bag
+    assert main(["import-csv", str(bad), "--out", str(out), "--joints", "a"]) == 2
+    assert "'tau_con1' is not a finite number in row 3" in capsys.readouterr().err
+    assert main(["import-csv", good, "--out", str(out), "--joints", "a,a"]) == 2
+    assert "needs distinct, non-empty names" in capsys.readouterr().err
+    assert main(["import-csv", good, "--out", str(out), "--joints", "a,b"]) == 0
+    assert main(["import-csv", good, "--out", str(out), "--joints", "a,b"]) == 2
+    assert "exist already" in capsys.readouterr().err
+    args = ["import-csv", good, "--out", str(tmp_path / "x"), "--joints", "a,b"]
+    assert main([*args, "--columns", "time=time,speed=v{}"]) == 2
+    assert "'speed=v{}' is not one of" in capsys.readouterr().err

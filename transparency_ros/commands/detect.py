@@ -77,25 +77,18 @@ def register(subparsers: Any) -> None:
     d.add_argument(
         "--labels",
         metavar="PATTERN",
-        help="column of the true external torque per joint, e.g. tau_pert{}",
+        help="column of the true external torque per joint, e.g. tau_pert{}; in bags the "
+        "topic /true_external_effort (as import-csv --joints writes it), or the topic given "
+        "if it starts with /",
     )
-    d.add_argument("--desired", default="pos_des{}", help="desired-position column pattern")
+    d.add_argument(
+        "--desired",
+        default="pos_des{}",
+        help="desired-position column pattern (in bags: /joint_commands' positions)",
+    )
     d.add_argument("--report", metavar="DIR", help="write a plot per recording here")
     d.add_argument("--json", action="store_true", help="print the score as JSON")
     d.set_defaults(func=run_detect)
-
-
-def _columns(text: str, labels: str | None = None, desired: str | None = None) -> Any:
-    from transparency_ros.analysis.robot_data import Columns  # noqa: PLC0415
-
-    known = {"time", "position", "velocity", "torque"}
-    values: dict[str, str | None] = {}
-    for item in text.split(","):
-        key, _, value = item.partition("=")
-        if key not in known or not value:
-            raise ConfigError(f"--columns: {item!r} is not one of {sorted(known)}=PATTERN")
-        values[key] = value
-    return Columns(**values, label=labels, desired=desired)  # type: ignore[arg-type]
 
 
 def _model(args: argparse.Namespace) -> Any:
@@ -111,14 +104,23 @@ def _recordings(
     args: argparse.Namespace, model: Any, paths: list[str], labels: str | None = None
 ) -> list[Any]:
     """The recordings in ``paths`` (CSV or bags, globs expanded), in the model's joint order."""
-    from transparency_ros.analysis.robot_data import read_joint_bag, read_joint_csv  # noqa: PLC0415
+    from transparency_ros.analysis.robot_data import (  # noqa: PLC0415
+        LABEL_TOPIC,
+        Columns,
+        read_joint_bag,
+        read_joint_csv,
+    )
     from transparency_ros.analysis.robot_detect import in_model_order  # noqa: PLC0415
 
     joints = args.joints.split(",") if args.joints else list(model.joint_names)
-    columns = _columns(args.columns, labels, getattr(args, "desired", None))
+    columns = Columns.parse(args.columns, label=labels, desired=getattr(args, "desired", None))
+    # in a bag the labels are a topic: the one given, or the one import-csv writes
+    topic = None if labels is None else (labels if labels.startswith("/") else LABEL_TOPIC)
     files = [f for p in paths for f in (sorted(glob.glob(p)) or [p])]
     recordings = [
-        read_joint_csv(f, joints, columns) if ".csv" in Path(f).name else read_joint_bag(f, joints)
+        read_joint_csv(f, joints, columns)
+        if ".csv" in Path(f).name
+        else read_joint_bag(f, joints, topic)
         for f in files
     ]
     for rec in recordings:

@@ -21,19 +21,35 @@ def register(subparsers: Any) -> None:
         "import-csv",
         help="turn column data (time, position, velocity, torque) into rosbag2 MCAP bags",
         description=(
-            "One bag per CSV file: /joint_states (sensor_msgs/msg/JointState) with position "
-            "[rad], velocity [rad/s] and effort = torque [N m], stamped with the time column; "
-            "custom_data transparency.trial = torque_driven and transparency.source = the file."
+            "One bag per CSV file (plain or .xz), stamped with the time column. One joint "
+            "(--joint): /joint_states (sensor_msgs/msg/JointState) with position [rad], "
+            "velocity [rad/s] and effort = torque [N m], custom_data transparency.trial = "
+            "torque_driven, for `transparency discrepancy`. Several joints (--joints): "
+            "/joint_states (position, velocity; effort = the --measured torque where the file "
+            "has it), /joint_commands (effort = the commanded torque; position = --desired "
+            "where the file has it) and /true_external_effort (effort = --labels where the file "
+            "has it), transparency.trial = robot, for `transparency calibrate` and `detect`. "
+            "custom_data transparency.source = the file."
         ),
     )
     p.add_argument("csv", nargs="+")
     p.add_argument("--out", required=True, help="directory for the bags")
     p.add_argument(
         "--columns",
-        default="time,position,velocity,torque",
-        help="names of the time, position, velocity and torque columns, in that order",
+        help="one joint: names of the time, position, velocity and torque columns, in that "
+        "order (default time,position,velocity,torque); several joints: patterns, {} is the "
+        "joint's number (default time=time,position=pos_meas{},velocity=vel_meas{},"
+        "torque=tau_con{}, the DFKI double pendulum's)",
     )
-    p.add_argument("--joint", default="joint", help="joint name in the bag")
+    p.add_argument("--joint", default="joint", help="joint name in the bag (one joint)")
+    p.add_argument(
+        "--joints",
+        metavar="NAMES",
+        help="the joints of the columns numbered 1, 2, ... (comma-separated): a robot's bag",
+    )
+    p.add_argument("--measured", default="tau_meas{}", help="several joints: measured torque")
+    p.add_argument("--desired", default="pos_des{}", help="several joints: desired position")
+    p.add_argument("--labels", default="tau_pert{}", help="several joints: true external torque")
     p.set_defaults(func=run_import)
 
     d = subparsers.add_parser(
@@ -71,7 +87,9 @@ def run_import(args: argparse.Namespace) -> int:
         time_msg,
     )
 
-    names = [c.strip() for c in args.columns.split(",")]
+    if args.joints:
+        return _import_robot(args)
+    names = [c.strip() for c in (args.columns or "time,position,velocity,torque").split(",")]
     if len(names) != 4:
         raise ConfigError("--columns needs four names: time, position, velocity, torque")
     out = Path(args.out)
@@ -107,6 +125,46 @@ def run_import(args: argparse.Namespace) -> int:
                 )
                 writer.write_message("/joint_states", ns, msg)
         print(f"{bag}  ({t.size} samples)")
+    return 0
+
+
+def _import_robot(args: argparse.Namespace) -> int:
+    """Every file read (and checked) before any bag is written."""
+    from transparency_ros.analysis.robot_data import (  # noqa: PLC0415
+        Columns,
+        read_joint_csv,
+        write_joint_bag,
+    )
+    from transparency_ros.bag.writer import check_writable  # noqa: PLC0415
+
+    joints = [j.strip() for j in args.joints.split(",")]
+    if not all(joints) or len(set(joints)) != len(joints):
+        raise ConfigError(f"--joints: {args.joints!r} needs distinct, non-empty names")
+    default = "time=time,position=pos_meas{},velocity=vel_meas{},torque=tau_con{}"
+    columns = Columns.parse(
+        args.columns or default, label=args.labels, desired=args.desired, measured=args.measured
+    )
+    out = Path(args.out)
+    bags = [out / Path(f).name.split(".")[0] for f in args.csv]
+    taken = [str(b) for b in bags if b.exists()]
+    if taken or len(set(bags)) != len(bags):
+        raise ConfigError(f"--out: bag(s) {taken or bags} exist already or twice; not overwritten")
+    recordings = [read_joint_csv(f, joints, columns) for f in args.csv]
+    check_writable(out)
+    for path, bag, rec in zip(args.csv, bags, recordings, strict=True):
+        for note in rec.notes:
+            print(f"note: {note}", file=sys.stderr)
+        write_joint_bag(bag, rec, Path(path).name)
+        extra = [
+            name
+            for name, a in (("measured", rec.measured), ("desired", rec.desired),
+                            ("labels", rec.label))
+            if a is not None
+        ]  # fmt: skip
+        print(
+            f"{bag}  ({rec.stamps_ns.size} samples of {len(joints)} joints"
+            + (f"; with {', '.join(extra)})" if extra else ")")
+        )
     return 0
 
 
