@@ -385,7 +385,8 @@ def test_the_momentum_observer_method_finds_a_push_on_the_joint_it_acts_on(
     tracks sines under a PD controller whose efforts go out on /joint_commands after each
     sample (as a controller sends them, on another topic); a 0.3 N m push
     on j1 from 1.0 s is reported on j1 (and nowhere else), /estimated_effort carries it, and a
-    sample without velocities or with a NaN is rejected, counted, and the node goes on."""
+    sample without velocities or without one of the URDF's joints is rejected, counted, and the
+    node goes on."""
     import numpy as np  # noqa: PLC0415
 
     from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
@@ -419,6 +420,9 @@ def test_the_momentum_observer_method_finds_a_push_on_the_joint_it_acts_on(
     bad = JointState(name=["j0", "j1"], position=[0.0, 0.0])  # no velocities
     bad.header.stamp.sec = 1_800_000_002
     rig.states_pub.publish(bad)
+    partial = JointState(name=["j0"], position=[0.0], velocity=[0.0])  # j1 of the URDF missing
+    partial.header.stamp.sec = 1_800_000_003
+    rig.states_pub.publish(partial)
     assert wait_for(lambda: len(rig.estimates) == len(stamps), timeout_s=10.0)
     assert [c.header.frame_id for c in rig.contacts] == ["j1"]
     onset_s = (stamp_ns_of(rig.contacts[0]) - base_ns) * 1e-9
@@ -427,23 +431,41 @@ def test_the_momentum_observer_method_finds_a_push_on_the_joint_it_acts_on(
     assert list(during.name) == ["j0", "j1"]
     assert during.effort[1] == pytest.approx(0.3, abs=0.03)
     assert abs(during.effort[0]) < 0.05
-    assert wait_for(lambda: rig.node.pipeline.rejected == {"length_mismatch": 1})
+    assert wait_for(
+        lambda: rig.node.pipeline.rejected == {"length_mismatch": 1, "missing_joint": 1}
+    )
 
 
-def test_the_momentum_observer_method_refuses_a_bad_robot_description(ros_context: Context
-                                                                      ) -> None:  # fmt: skip
+def test_the_momentum_observer_method_refuses_a_bad_robot_description_or_calibration(
+    ros_context: Context, tmp_path: Any
+) -> None:
+    """One line naming what is wrong: no URDF, a URDF naming an undefined link, a calibration
+    file that is missing or not one, or a calibration of another robot's joints."""
     from transparency_ros.core.errors import ConfigError  # noqa: PLC0415
+    from transparency_ros.core.robot_calibration import Calibration  # noqa: PLC0415
+    from transparency_ros.synth.robots import chain_urdf  # noqa: PLC0415
 
-    for description, message in (
-        ("", "needs robot_description"),
+    one = [0.0]
+    other = Calibration("arm", ("shoulder",), 20.0, 0.0, [[1.0] + [0.0] * 9], one, one, one,
+                        one, [0.0], [[1.0]])  # fmt: skip
+    other.save(tmp_path / "arm.yaml")
+    (tmp_path / "text.yaml").write_text("just: words\n")
+    cases = [
+        ("", "", "needs robot_description"),
         ("<robot name='r'><link name='a'/><joint name='j' type='revolute'><parent link='a'/>"
-         "<child link='b'/></joint></robot>", "names child link 'b'"),
-    ):  # fmt: skip
+         "<child link='b'/></joint></robot>", "", "names child link 'b'"),
+        (chain_urdf(2), str(tmp_path / "none.yaml"), "none.yaml: not a calibration file"),
+        (chain_urdf(2), str(tmp_path / "text.yaml"), "text.yaml: not a calibration file"),
+        (chain_urdf(2), str(tmp_path / "arm.yaml"), r"\['shoulder'\].*\['j0', 'j1'\]: a "
+         "calibration from another robot"),
+    ]  # fmt: skip
+    for description, calibration, message in cases:
         with pytest.raises(ConfigError, match=message):
             ContactEstimatorNode(
                 context=ros_context,
                 parameter_overrides=[
                     Parameter("method", value="momentum_observer"),
                     Parameter("robot_description", value=description),
+                    Parameter("calibration_file", value=calibration),
                 ],
             )
