@@ -64,6 +64,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/momentum_observer.py
 	$(BIN)/python benchmarks/pendubot_detection.py
 	$(BIN)/python benchmarks/pendubot_residual_floor.py
+	$(BIN)/python benchmarks/independent_robot.py
 
 # Bounded mutational fuzzing (not part of make test); findings: benchmarks/results/fuzz/, status 1.
 fuzz: $(STAMP)
