@@ -2,6 +2,7 @@
 leave-one-run-out: the detectors side by side, scored alike.
 
     .venv/bin/python benchmarks/pendubot_detection.py [--gains 5 20 50] [--shared DIR] [--out DIR]
+        [--velocity-from-positions]
 
 The lab's 10 runs without disturbances and 10 runs with labelled disturbance pulses (added to the
 motor command after the controller; tau_pert is their truth). Fold k: calibrate on the clean runs
@@ -17,7 +18,9 @@ disturbed runs (never calibrated on). Detectors:
 
 A pulse counts from its first sample at 0.05 N m; found when an onset falls between then and
 0.1 s after it ends; delay from the first sample at half its peak. Pooled over the 10 folds.
-Writes benchmarks/results/pendubot_detection.md and .json.
+Writes benchmarks/results/pendubot_detection.md and .json; with --velocity-from-positions
+(every run's velocity the central difference of its positions, a sample behind, as
+pendubot_residual_floor.py does) pendubot_detection_position_velocity.md and .json.
 """
 
 from __future__ import annotations
@@ -91,6 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--gains", type=float, nargs="+", default=[5.0, 20.0, 50.0])
     parser.add_argument("--shared", default=str(SHARED))
     parser.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    parser.add_argument("--velocity-from-positions", action="store_true")
     args = parser.parse_args(argv)
     started = time.perf_counter()
     root = Path(args.shared)
@@ -98,12 +102,23 @@ def main(argv: list[str] | None = None) -> int:
     joints = list(base.joint_names)
     clean = [read_joint_csv(f, joints) for f in sorted(root.glob("pendubot_clean_*.csv.xz"))]
     pert = [read_joint_csv(f, joints) for f in sorted(root.glob("pendubot_pert_*.csv.xz"))]
+    name = "pendubot_detection"
+    if args.velocity_from_positions:
+        from pendubot_residual_floor import position_velocity  # noqa: PLC0415
+
+        clean, pert = [position_velocity(r) for r in clean], [position_velocity(r) for r in pert]
+        name += "_position_velocity"
     minutes = sum(r.duration_s for r in pert) / 60
     lines = [
         f"Real double pendulum, leave-one-run-out over its {len(clean)} runs without "
         f"disturbances; scored on the held-out clean run and on the {len(pert)} disturbed runs "
         f"({minutes:.1f} min, {sum(len(rd.pulses(r)) for r in pert)} pulses), pooled over "
-        "the folds.",
+        "the folds."
+        + (
+            " Velocity from the positions (central difference, a sample behind)."
+            if args.velocity_from_positions
+            else ""
+        ),
         "",
         "| gain K_o [1/s] | detector | pulses found (disturbed runs) | false alarms / min "
         "(disturbed) | delay median / p90 [ms] | judged | false alarms / min (held-out clean) |",
@@ -152,9 +167,11 @@ def main(argv: list[str] | None = None) -> int:
         f"it is scored on {', '.join(r.name for r in scored)}, with no folds.",
         "",
         f"{time.perf_counter() - started:.0f} s (`.venv/bin/python "
-        "benchmarks/pendubot_detection.py`).",
+        "benchmarks/pendubot_detection.py"
+        + "".join(f" {a}" for a in (sys.argv[1:] if argv is None else argv))
+        + "`).",
     ]
-    write_results(args.out, "pendubot_detection", lines, data)
+    write_results(args.out, name, lines, data)
     return 0
 
 
