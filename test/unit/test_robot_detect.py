@@ -171,6 +171,8 @@ def test_calibrate_and_detect_on_the_real_double_pendulum_from_the_command_line(
     out = capsys.readouterr()
     assert "calibrated pendulum_mj_bots_001 (Joint1, Joint2) on 2 recordings" in out.out
     assert "taken as the fixed world" in out.err
+    assert "positive definite at 0% of the configurations" in out.out
+    assert "fits the torque balance, not the physics" in out.err  # and says what that means
     pert = str(SHARED / "pendubot_pert_01.csv.xz")
     args = ["detect", pert, "--urdf", urdf, "--labels", "tau_pert{}"]
     code = main([*args, "--calibration", str(tmp_path / "cal.yaml"), "--report", str(tmp_path)])
@@ -203,6 +205,9 @@ def test_calibrate_and_detect_read_bags_of_states_and_commands(
     urdf = str(tmp_path / "chain.urdf")
     cal = str(tmp_path / "cal.yaml")
     assert main(["calibrate", str(bags[0]), str(bags[1]), "--urdf", urdf, "--out", cal]) == 0
+    calibrated = capsys.readouterr()
+    assert "positive definite at 100% of the configurations" in calibrated.out
+    assert "not the physics" not in calibrated.err
     assert main(["detect", str(bags[2]), "--urdf", urdf, "--calibration", cal]) == 0
     out = capsys.readouterr().out
     onsets = {

@@ -142,6 +142,13 @@ def run_calibrate(args: argparse.Namespace) -> int:
         f"{cal.torque_rms_nm:.3f} N m RMS, mass matrix positive definite at "
         f"{cal.mass_matrix_positive_share:.0%} of the configurations; written to {args.out}"
     )
+    if cal.mass_matrix_positive_share < 1.0:
+        print(
+            "note: the calibration fits the torque balance, not the physics (see docs/robots.md):"
+            " the observer uses M(q) only through p = M(q) q' and never inverts it, but do not "
+            "simulate with this model",
+            file=sys.stderr,
+        )
     return 0
 
 
