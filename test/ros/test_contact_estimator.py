@@ -439,8 +439,9 @@ def test_the_momentum_observer_method_finds_a_push_on_the_joint_it_acts_on(
 def test_the_momentum_observer_method_refuses_a_bad_robot_description_or_calibration(
     ros_context: Context, tmp_path: Any
 ) -> None:
-    """One line naming what is wrong: no URDF, a URDF naming an undefined link, a calibration
-    file that is missing or not one, or a calibration of another robot's joints."""
+    """One line naming what is wrong: a URDF naming an undefined link, a calibration file that
+    is missing or not one (also when the URDF is to come from /robot_description), or a
+    calibration of another robot's joints."""
     from transparency_ros.core.errors import ConfigError  # noqa: PLC0415
     from transparency_ros.core.robot_calibration import Calibration  # noqa: PLC0415
     from transparency_ros.synth.robots import chain_urdf  # noqa: PLC0415
@@ -451,7 +452,7 @@ def test_the_momentum_observer_method_refuses_a_bad_robot_description_or_calibra
     other.save(tmp_path / "arm.yaml")
     (tmp_path / "text.yaml").write_text("just: words\n")
     cases = [
-        ("", "", "needs robot_description"),
+        ("", str(tmp_path / "none.yaml"), "none.yaml: not a calibration file"),  # the topic's
         ("<robot name='r'><link name='a'/><joint name='j' type='revolute'><parent link='a'/>"
          "<child link='b'/></joint></robot>", "", "names child link 'b'"),
         (chain_urdf(2), str(tmp_path / "none.yaml"), "none.yaml: not a calibration file"),
@@ -469,3 +470,43 @@ def test_the_momentum_observer_method_refuses_a_bad_robot_description_or_calibra
                     Parameter("calibration_file", value=calibration),
                 ],
             )
+
+
+def test_the_momentum_observer_takes_its_urdf_from_robot_description(rig_factory: Any) -> None:
+    """robot_description '': the node waits for /robot_description (latched, as
+    robot_state_publisher publishes it), rejecting and counting samples meanwhile; a URDF that
+    does not load is logged and changes nothing; a good one builds the observer, and a later
+    one replaces it."""
+    from std_msgs.msg import String  # noqa: PLC0415
+
+    from transparency_ros.core.robot_pipeline import AwaitingModel, ObserverPipeline  # noqa: PLC0415
+    from transparency_ros.synth.robots import chain_urdf  # noqa: PLC0415
+
+    rig = rig_factory(method="momentum_observer", robot_description="")
+    assert isinstance(rig.node.pipeline, AwaitingModel)
+
+    def state(stamp_s: float, joints: list[str]) -> None:
+        msg = JointState(name=joints, position=[0.0] * len(joints), velocity=[0.0] * len(joints))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = int(stamp_s), 0
+        rig.states_pub.publish(msg)
+
+    state(1.0, ["j0", "j1"])
+    assert wait_for(lambda: rig.node.pipeline.rejected.get("no_robot_description") == 1)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    description = rig.probe.create_publisher(String, "/robot_description", latched)
+    description.publish(String(data="<robot name='r'><link name='a'/></robot"))  # not XML
+    state(2.0, ["j0", "j1"])
+    assert wait_for(lambda: rig.node.pipeline.rejected.get("no_robot_description") == 2)
+    assert isinstance(rig.node.pipeline, AwaitingModel)
+    description.publish(String(data=chain_urdf(2)))
+    assert wait_for(lambda: isinstance(rig.node.pipeline, ObserverPipeline))
+    for k in range(3, 6):
+        state(float(k), ["j0", "j1"])
+    assert wait_for(lambda: len(rig.estimates) == 3)
+    assert list(rig.estimates[-1].name) == ["j0", "j1"]
+    assert rig.node.pipeline.rejected == {"no_robot_description": 2}  # the count goes on
+    description.publish(String(data=chain_urdf(3)))
+    assert wait_for(lambda: rig.node.pipeline.model.dof == 3)
+    state(6.0, ["j0", "j1", "j2"])
+    assert wait_for(lambda: len(rig.estimates) == 4)
+    assert list(rig.estimates[-1].name) == ["j0", "j1", "j2"]

@@ -155,3 +155,29 @@ class ObserverPipeline:
     def reset(self) -> None:
         self.detector.reset()
         self.observer.reset()
+
+
+@dataclass
+class AwaitingModel:
+    """The ``momentum_observer`` method before its robot model has come (the node takes the
+    URDF from /robot_description when its parameter is empty, as ros2_control's controller
+    manager does): every sample and command is rejected and counted, ``no_robot_description``."""
+
+    rejected: dict[str, int] = field(default_factory=dict)
+    samples: int = 0
+
+    def reject(self, reason: str, detail: str) -> SampleRejectedError:
+        self.rejected[reason] = self.rejected.get(reason, 0) + 1
+        return SampleRejectedError(reason, detail)
+
+    def _waiting(self) -> SampleRejectedError:
+        return self.reject("no_robot_description", "no robot model yet (/robot_description)")
+
+    def command(self, *_args: object, **_kwargs: object) -> None:
+        raise self._waiting()
+
+    def sample(self, *_args: object) -> tuple[list[JointEstimate], list[ContactEvent]]:
+        raise self._waiting()
+
+    def reset(self) -> None:
+        """Nothing to clear before the model comes."""

@@ -46,7 +46,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
-from std_msgs.msg import UInt8
+from std_msgs.msg import String, UInt8
 from std_srvs.srv import Trigger
 
 from transparency_ros.core import stamps
@@ -69,7 +69,7 @@ from transparency_ros.core.estimator import (
     SchmittDetector,
 )
 from transparency_ros.core.histogram import DurationHistogram
-from transparency_ros.core.robot_pipeline import ObserverPipeline
+from transparency_ros.core.robot_pipeline import AwaitingModel, ObserverPipeline
 from transparency_ros.ros import in_process
 from transparency_ros.ros.conversions import stamp_to_ns
 from transparency_ros.ros.hot_path import Delivery, HotPath
@@ -91,7 +91,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     P(
         "robot_description",
         "",
-        "momentum_observer: the URDF, as XML or a file path (as robot_state_publisher takes it)",
+        "momentum_observer: the URDF, as XML or a file path (as robot_state_publisher takes it); "
+        "'': the latest on the /robot_description topic (as robot_state_publisher publishes it)",
         read_only=True,
     ),
     P(
@@ -232,7 +233,7 @@ def observer_pipeline(values: dict[str, Any]) -> ObserverPipeline:
     from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
 
     if not values["robot_description"].strip():
-        raise ConfigError("method momentum_observer needs robot_description (a URDF)")
+        raise ConfigError("method momentum_observer needs a URDF (robot_description is empty)")
     model = RobotModel.from_urdf(values["robot_description"])
     calibration = (
         Calibration.load(values["calibration_file"]) if values["calibration_file"] else None
@@ -251,9 +252,19 @@ class ContactEstimatorNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.values = declare(self, PARAMETERS)
         joints = frozenset(j for j in self.values["joints"] if j)
-        self.pipeline: EstimatorPipeline | ObserverPipeline
-        if self.values["method"] == "momentum_observer":
+        self.pipeline: EstimatorPipeline | ObserverPipeline | AwaitingModel
+        self._description = ""  # the URDF the observer was built from, if from the topic
+        if self.values["method"] == "momentum_observer" and self.values["robot_description"]:
             self.pipeline = observer_pipeline(self.values)
+        elif self.values["method"] == "momentum_observer":
+            if self.values["calibration_file"]:  # a bad file is refused now, not on arrival
+                from transparency_ros.core.robot_calibration import (  # noqa: PLC0415
+                    Calibration,
+                )
+
+                Calibration.load(self.values["calibration_file"])
+            self.pipeline = AwaitingModel()
+            self.create_subscription(String, "/robot_description", self._on_description, LATCHED)
         else:
             self.pipeline = EstimatorPipeline(
                 gains=EstimatorGains(
@@ -332,6 +343,8 @@ class ContactEstimatorNode(Node):
     def _apply(self, params: list[Parameter]) -> None:
         for p in params:
             self.values[p.name] = p.value
+        if isinstance(self.pipeline, AwaitingModel):
+            return  # the pipeline built on arrival takes self.values
         if isinstance(self.pipeline, ObserverPipeline):
             with self.lock:
                 self.pipeline.detector.default = observer_settings(self.values)
@@ -350,6 +363,28 @@ class ContactEstimatorNode(Node):
             self._last_warn_s = now
             self.get_logger().warning(text)
 
+    def _on_description(self, msg: String) -> None:
+        """A URDF on /robot_description: the observer is (re)built from it. A URDF that does
+        not load, or that a calibration does not fit, is logged and the model in use kept."""
+        if msg.data == self._description:
+            return
+        try:
+            pipeline = observer_pipeline({**self.values, "robot_description": msg.data})
+        except (ConfigError, EstimatorError) as err:
+            self.get_logger().error(f"/robot_description not used: {err}")
+            return
+        with self.lock:
+            kept = dict(self.pipeline.rejected)
+            pipeline.rejected.update(kept)
+            replaced = isinstance(self.pipeline, ObserverPipeline)
+            self.pipeline = pipeline
+            self._description = msg.data
+        joints = ", ".join(pipeline.model.joint_names)
+        self.get_logger().info(
+            f"robot model {'replaced' if replaced else 'received'} from /robot_description: "
+            f"{pipeline.model.dof} joints ({joints})"
+        )
+
     def _on_command(self, msg: JointState) -> None:
         try:
             stamp_ns = stamp_to_ns(msg.header.stamp)
@@ -360,7 +395,7 @@ class ContactEstimatorNode(Node):
                 stamp_ns if stamp_ns > 0 else None,
             )
             with self.lock:
-                if isinstance(self.pipeline, ObserverPipeline):
+                if isinstance(self.pipeline, (ObserverPipeline, AwaitingModel)):
                     self.pipeline.command(*args, efforts=list(msg.effort))
                 else:
                     self.pipeline.command(*args)
@@ -468,6 +503,8 @@ class ContactEstimatorNode(Node):
             ages = {"sample_age": self.sample_age.copy(), "onset_age": self.onset_age.copy()}
         rejected = sum(rejected_by.values())
         problems = [f"{rejected} samples rejected"] if rejected else []
+        if isinstance(self.pipeline, AwaitingModel):
+            problems.insert(0, "waiting for a URDF on /robot_description")
         delivery = self._delivery_values(problems)
         if self.hot_path.priority_error:
             problems.append(self.hot_path.priority_error)
@@ -521,6 +558,8 @@ class ContactEstimatorNode(Node):
             raise EstimatorError(result.reason)
 
     def detector_settings(self) -> DetectorSettings:
+        if isinstance(self.pipeline, AwaitingModel):
+            return observer_settings(self.values)
         return replace(self.pipeline.detector.default)
 
 
