@@ -136,9 +136,16 @@ def test_import_csv_then_discrepancy_json_and_report(tmp_path: Path) -> None:
 
     out = write_campaign(tmp_path / "campaign", 1, hidden=["torque_offset"], trials=4)
     csvs = sorted(str(f) for f in (out / "data").glob("*.csv"))
+    import lzma  # noqa: PLC0415
+
+    packed = Path(csvs[0] + ".xz")  # one file as the lab's come: xz-compressed
+    packed.write_bytes(lzma.compress(Path(csvs[0]).read_bytes()))
+    Path(csvs[0]).unlink()
+    csvs[0] = str(packed)
     assert main(["import-csv", *csvs, "--out", str(tmp_path / "bags")]) == 0
     bags = sorted((tmp_path / "bags").iterdir())
     assert len(bags) == 4 and all((b / "metadata.yaml").exists() for b in bags)
+    assert [b.name for b in bags] == [Path(c).name.split(".")[0] for c in csvs]
     import contextlib  # noqa: PLC0415
     import io  # noqa: PLC0415
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import io
 import json
+import lzma
 import sys
 from pathlib import Path
 from typing import Any
@@ -97,9 +99,14 @@ def run_import(args: argparse.Namespace) -> int:
     types = message_types()
     for path in map(Path, args.csv):
         try:
-            header = path.read_text().splitlines()[0].split(",")
-            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-        except (OSError, ValueError, IndexError) as err:
+            if path.suffix == ".xz":
+                with lzma.open(path, "rt") as f:
+                    text = f.read()
+            else:
+                text = path.read_text()
+            header = text.splitlines()[0].split(",")
+            data = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
+        except (OSError, ValueError, IndexError, lzma.LZMAError) as err:
             raise ConfigError(f"{path}: cannot read CSV: {err}") from err
         missing = [n for n in names if n not in header]
         if missing:
@@ -108,7 +115,7 @@ def run_import(args: argparse.Namespace) -> int:
         if not all(np.isfinite(c).all() for c in cols):
             raise ConfigError(f"{path}: NaN or inf in the data")
         t, q, qd, tau = cols
-        bag = out / path.stem
+        bag = out / bag_name(path)
         with BagWriter(
             bag, {"transparency.trial": TRIAL_KIND, "transparency.source": path.name}
         ) as writer:
@@ -128,6 +135,14 @@ def run_import(args: argparse.Namespace) -> int:
     return 0
 
 
+def bag_name(path: Path) -> str:
+    """The bag of ``path``: its name without .xz and .csv (``run_01.csv.xz`` -> ``run_01``)."""
+    name = path.name
+    for suffix in (".xz", ".csv"):
+        name = name.removesuffix(suffix)
+    return name
+
+
 def _import_robot(args: argparse.Namespace) -> int:
     """Every file read (and checked) before any bag is written."""
     from transparency_ros.analysis.robot_data import (  # noqa: PLC0415
@@ -145,7 +160,7 @@ def _import_robot(args: argparse.Namespace) -> int:
         args.columns or default, label=args.labels, desired=args.desired, measured=args.measured
     )
     out = Path(args.out)
-    bags = [out / Path(f).name.split(".")[0] for f in args.csv]
+    bags = [out / bag_name(Path(f)) for f in args.csv]
     taken = [str(b) for b in bags if b.exists()]
     if taken or len(set(bags)) != len(bags):
         raise ConfigError(f"--out: bag(s) {taken or bags} exist already or twice; not overwritten")
