@@ -6,7 +6,6 @@ benchmark (benchmarks/pendubot_detection.py)."""
 from __future__ import annotations
 
 import lzma
-import re
 from pathlib import Path
 
 import numpy as np
@@ -172,11 +171,8 @@ def test_calibrate_and_detect_on_the_real_double_pendulum_from_the_command_line(
     out = capsys.readouterr()
     assert "calibrated pendulum_mj_bots_001 (Joint1, Joint2) on 2 recordings" in out.out
     assert "taken as the fixed world" in out.err
-    # the weakest pull towards the URDF that leaves a mass matrix a robot can have
-    pulled = re.search(r"pulled towards the URDF by (\S+), mass matrix positive definite at "
-                       r"100% of the configurations", out.out)  # fmt: skip
-    assert pulled is not None and float(pulled.group(1)) > 1e-3
-    assert "not the physics" not in out.err
+    assert "positive definite at 0% of the configurations" in out.out
+    assert "fits the torque balance, not the physics" in out.err  # and says what that means
     pert = str(SHARED / "pendubot_pert_01.csv.xz")
     args = ["detect", pert, "--urdf", urdf, "--labels", "tau_pert{}"]
     code = main([*args, "--calibration", str(tmp_path / "cal.yaml"), "--report", str(tmp_path)])
@@ -284,22 +280,3 @@ def test_import_csv_of_several_joints_refuses_bad_input_and_writes_nothing(
     args = ["import-csv", good, "--out", str(tmp_path / "x"), "--joints", "a,b"]
     assert main([*args, "--columns", "time=time,speed=v{}"]) == 2
     assert "'speed=v{}' is not one of" in capsys.readouterr().err
-
-
-def test_calibration_says_when_no_pull_gives_a_mass_matrix_a_robot_can_have(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """With only the weakest pull allowed, the pendubot's fit has a mass matrix that is positive
-    definite nowhere (its passive elbow leaves combinations of the parameters free), and the
-    command says what that means."""
-    from transparency_ros.analysis import robot_calibration  # noqa: PLC0415
-    from transparency_ros.cli import main  # noqa: PLC0415
-
-    monkeypatch.setattr(robot_calibration, "PRIOR_WEIGHTS", (1e-3,))
-    clean = [str(SHARED / f"pendubot_clean_0{k}.csv.xz") for k in (1, 2)]
-    out = str(tmp_path / "cal.yaml")
-    assert main(["calibrate", *clean, "--urdf", str(SHARED / "pendubot.urdf"), "--out", out]) == 0
-    printed = capsys.readouterr()
-    assert "pulled towards the URDF by 0.001, mass matrix positive definite at 0%" in printed.out
-    assert "fits the torque balance, not the physics" in printed.err
-    assert Calibration.load(out).mass_matrix_positive_share == 0.0

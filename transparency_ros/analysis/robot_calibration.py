@@ -11,11 +11,9 @@ learns what the model misses and stores it as a YAML the detector loads:
   joint-torque regressor: the dynamics are linear in them, tau = Y(q, q', q'') pi, so one solve
   is exact (the discrepancy tool's fitter, which simulates windows of a 1-DoF model, is not
   needed here). Offline, q' and q'' come from a Savitzky-Golay fit of the positions. The fit is
-  drawn towards the URDF's values (ridge), as weakly as :data:`PRIOR_WEIGHTS` allows while its
-  mass matrix stays positive definite at every configuration the runs visited: a robot whose
-  torque balance only identifies combinations of its parameters (the pendubot's passive elbow)
-  otherwise fits a mass matrix no robot has, which extrapolates badly to motion the runs did
-  not show. The weight and the share where M is positive definite are stored with it;
+  drawn weakly towards the URDF's values (ridge). It is a fit of the torque balance, not a
+  physical identification: the share of configurations where its mass matrix is positive
+  definite is stored with it (the observer never inverts M);
 * **thresholds that depend on the motion**: the observer's residual on the calibration runs,
   with the calibrated model, grows with speed; per joint and speed band, the largest residual
   seen times a margin, never lower at a higher speed. Above the fastest speed calibrated the
@@ -44,9 +42,7 @@ DELAYS_S = tuple(k * 1e-3 for k in range(0, 21))  # command delays tried
 GRID_S = 0.002  # the positions are resampled on this grid for the regressor
 SMOOTHING_POINTS = 31  # Savitzky-Golay window (62 ms) for q', q'' and the torque alike
 MARGIN = 1.2  # thresholds: the largest calibration residual times this
-# the pull towards the URDF's values (ridge, relative), weakest first: the first whose mass
-# matrix is positive definite wherever the runs went is kept (else the last)
-PRIOR_WEIGHTS = (1e-3, 1e-2, 0.1, 0.3, 1.0, 3.0, 10.0)
+RIDGE = 1e-3  # drawn towards the URDF's values, relative
 
 
 def run_pipeline(
@@ -132,45 +128,19 @@ def calibrate(
         [rec.position[:: max(1, len(rec.position) // 100)] for rec in recordings]
     )
     best: tuple[float, float, FloatArray] | None = None
-    targets = {}
-    for delay in DELAYS_S:  # with the weakest pull: the delay is the signals' timing
-        targets[delay] = np.concatenate(
+    for delay in DELAYS_S:
+        target = np.concatenate(
             [_target(rec, g, delay, limit) for rec, g in zip(recordings, grids, strict=True)]
         )
-        solution = _ridge(x, targets[delay], prior, PRIOR_WEIGHTS[0])
-        rms = float(np.sqrt(np.mean((targets[delay] - x @ solution) ** 2)))
+        solution = _ridge(x, target, prior)
+        rms = float(np.sqrt(np.mean((target - x @ solution) ** 2)))
         if best is None or rms < best[0]:
             best = (rms, delay, solution)
     assert best is not None
     rms, delay, solution = best
-    for weight in PRIOR_WEIGHTS:
-        if weight != PRIOR_WEIGHTS[0]:
-            solution = _ridge(x, targets[delay], prior, weight)
-            rms = float(np.sqrt(np.mean((targets[delay] - x @ solution) ** 2)))
-        cal = _calibration(model, recordings, gain_per_s, delay=delay, solution=solution, rms=rms)
-        cal.prior_weight = weight
-        cal.mass_matrix_positive_share = positive_share(cal, model, visited)
-        if progress:
-            progress(
-                f"pull towards the URDF {weight:g}: torque residual {rms:.3f} N m RMS, mass "
-                f"matrix positive definite at {cal.mass_matrix_positive_share:.0%}"
-            )
-        if cal.mass_matrix_positive_share == 1.0:
-            break
-    if progress:
-        progress(f"command delay {delay * 1e3:.0f} ms, torque residual {rms:.3f} N m RMS")
-    cal.thresholds_nm = _thresholds(cal, model, recordings)
-    return cal
-
-
-def _calibration(
-    model: RobotModel, recordings: Sequence[JointRecording], gain_per_s: float, *,
-    delay: float, solution: FloatArray, rms: float,
-) -> Calibration:  # fmt: skip
-    n = model.dof
     m = 10 * n
-    return Calibration(
-        robot=str(model.pin_model.name),
+    cal = Calibration(
+        robot=str(pm.name),
         joints=tuple(model.joint_names),
         gain_per_s=gain_per_s,
         command_delay_s=delay,
@@ -184,6 +154,11 @@ def _calibration(
         calibrated_on=[r.name for r in recordings],
         torque_rms_nm=rms,
     )
+    if progress:
+        progress(f"command delay {delay * 1e3:.0f} ms, torque residual {rms:.3f} N m RMS")
+    cal.thresholds_nm = _thresholds(cal, model, recordings)
+    cal.mass_matrix_positive_share = positive_share(cal, model, visited)
+    return cal
 
 
 def _target(rec: JointRecording, grid: FloatArray, delay_s: float, limit: FloatArray
@@ -215,11 +190,11 @@ def _smoothed(rec: JointRecording) -> tuple[FloatArray, FloatArray, FloatArray, 
     return q[inner], v[inner], a[inner], grid[inner]
 
 
-def _ridge(x: FloatArray, target: FloatArray, prior: FloatArray, weight: float) -> FloatArray:
-    """Least squares drawn towards ``prior`` by ``weight`` (relative to each column's size); a
-    parameter the motion does not excite (a planar robot's other axes) stays at its prior."""
+def _ridge(x: FloatArray, target: FloatArray, prior: FloatArray) -> FloatArray:
+    """Least squares drawn weakly towards ``prior``; a parameter the motion does not excite (a
+    planar robot's other axes) stays at its prior."""
     rms = np.sqrt(np.mean(x**2, axis=0))
-    reg = np.diag(weight * math.sqrt(x.shape[0]) * np.maximum(rms, 1e-3 * rms.max()))
+    reg = np.diag(RIDGE * math.sqrt(x.shape[0]) * np.maximum(rms, 1e-3 * rms.max()))
     solution = np.linalg.lstsq(np.r_[x, reg], np.r_[target, reg @ prior], rcond=None)[0]
     return np.asarray(solution, dtype=np.float64)
 

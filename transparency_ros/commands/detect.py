@@ -139,16 +139,14 @@ def run_calibrate(args: argparse.Namespace) -> int:
     print(
         f"calibrated {cal.robot} ({', '.join(cal.joints)}) on {len(recordings)} recordings: "
         f"command delay {cal.command_delay_s * 1e3:.0f} ms, torque residual "
-        f"{cal.torque_rms_nm:.3f} N m RMS, pulled towards the URDF by {cal.prior_weight:g}, "
-        f"mass matrix positive definite at {cal.mass_matrix_positive_share:.0%} of the "
-        f"configurations; written to {args.out}"
+        f"{cal.torque_rms_nm:.3f} N m RMS, mass matrix positive definite at "
+        f"{cal.mass_matrix_positive_share:.0%} of the configurations; written to {args.out}"
     )
     if cal.mass_matrix_positive_share < 1.0:
         print(
-            "note: even the strongest pull towards the URDF left a mass matrix that is not "
-            "positive definite everywhere: the calibration fits the torque balance, not the "
-            "physics (see docs/robots.md); the observer uses M(q) only through p = M(q) q' and "
-            "never inverts it, but do not simulate with this model",
+            "note: the calibration fits the torque balance, not the physics (see docs/robots.md):"
+            " the observer uses M(q) only through p = M(q) q' and never inverts it, but do not "
+            "simulate with this model",
             file=sys.stderr,
         )
     return 0

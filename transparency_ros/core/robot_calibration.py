@@ -44,7 +44,6 @@ class Calibration:
     calibrated_on: list[str] = field(default_factory=list)
     torque_rms_nm: float = math.nan  # of the regression, on the calibration runs
     mass_matrix_positive_share: float = math.nan  # of the calibration runs' configurations
-    prior_weight: float = math.nan  # the fit's pull towards the URDF's values (ridge, relative)
 
     def model(self, base: RobotModel) -> RobotModel:
         """``base`` (the URDF's model) with the calibrated values."""
