@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -58,26 +57,6 @@ def pooled(scores: list[rd.Score]) -> rd.Score:
     return out
 
 
-CHANCE_SHIFTS_S = (1.3, 2.6, 3.9)  # the labels moved in time (circularly within each run)
-
-
-def shifted(rec: Any, shift_s: float) -> Any:
-    """``rec`` with its labels moved ``shift_s`` later (wrapping round): what a detector finds
-    of them is what its onsets hit by chance."""
-    samples = round(shift_s / (rec.duration_s / (len(rec.stamps_ns) - 1)))
-    return replace(rec, label=np.roll(rec.label, samples, axis=0))
-
-
-def by_chance(detections: list[Any], pert: list[Any]) -> rd.Score:
-    """The detections scored against the labels moved in time, pooled over the shifts: the
-    pulses a detector with these onsets finds by chance."""
-    scores = [rd.score(detections, [shifted(r, s) for r in pert]) for s in CHANCE_SHIFTS_S]
-    out = pooled(scores)
-    out.pulses //= len(CHANCE_SHIFTS_S)
-    out.found = round(out.found / len(CHANCE_SHIFTS_S))
-    return out
-
-
 def run_gain(base: RobotModel, clean: list[Any], pert: list[Any], gain: float) -> dict[str, Any]:
     rows: dict[str, dict[str, list[rd.Score]]] = {
         m: {"held_clean": [], "pert": [], "chance": []} for m in ("calibrated", "textbook")
@@ -89,14 +68,14 @@ def run_gain(base: RobotModel, clean: list[Any], pert: list[Any], gain: float) -
         rows["calibrated"]["held_clean"].append(rd.score([rd.calibrated(base, cal, held)], [held]))
         detections = [rd.calibrated(base, cal, r) for r in pert]
         rows["calibrated"]["pert"].append(rd.score(detections, pert))
-        rows["calibrated"]["chance"].append(by_chance(detections, pert))
+        rows["calibrated"]["chance"].append(rd.by_chance(detections, pert))
         tb = rd.constant_thresholds([rd.textbook_residual(base, r, gain) for r in train])
         rows["textbook"]["held_clean"].append(
             rd.score([rd.with_threshold(held, rd.textbook_residual(base, held, gain), tb)], [held])
         )
         detections = [rd.with_threshold(r, rd.textbook_residual(base, r, gain), tb) for r in pert]
         rows["textbook"]["pert"].append(rd.score(detections, pert))
-        rows["textbook"]["chance"].append(by_chance(detections, pert))
+        rows["textbook"]["chance"].append(rd.by_chance(detections, pert))
     return {m: {k: pooled(v) for k, v in parts.items() if v} for m, parts in rows.items()}
 
 
@@ -178,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
         pe = rd.constant_thresholds([rd.position_error(r) for r in ref])
         s = rd.score([rd.with_threshold(r, rd.position_error(r), pe) for r in scored], scored)
         detections = [rd.with_threshold(r, rd.position_error(r), pe) for r in scored]
-        chance = by_chance(detections, scored)
+        chance = rd.by_chance(detections, scored)
         lines.append(
             f"| - | position_error (eq. (1)) | {cells(s, True)} | - | "
             f"{chance.found}/{chance.pulses} ({chance.recall:.0%}) |"
@@ -189,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     lines += [
         "",
         "Found by chance: the same detections scored against the labels moved "
-        f"{', '.join(f'{x:g}' for x in CHANCE_SHIFTS_S)} s later (wrapping round within each "
+        f"{', '.join(f'{x:g}' for x in rd.CHANCE_SHIFTS_S)} s later (wrapping round within each "
         "run), the mean: the pulses a detector with these onsets finds without seeing them.",
         "",
         "eq. (1) (pos_des - pos_meas [rad]): only "

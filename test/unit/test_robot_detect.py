@@ -103,6 +103,26 @@ def test_the_score_counts_pulses_found_false_alarms_and_the_delay_from_half_the_
     assert (only_b.pulses, only_b.found, only_b.false_alarms) == (1, 1, 0)
 
 
+def test_by_chance_is_what_the_same_onsets_find_of_the_labels_moved_in_time() -> None:
+    """One pulse in 10 s: an onset on it finds it, and none of it moved 1.3-3.9 s later; an
+    alarm every 0.1 s finds it wherever it is."""
+    label = np.zeros((5000, 2))
+    label[500:551, 0] = 0.4 * (1 - np.abs(np.arange(51) - 25) / 25)  # from 1.0 s
+    rec = recording(label)
+    t = rec.stamps_ns * 1e-9
+
+    def det(onsets: list[float]) -> rd.Detection:
+        return rd.Detection("r", ("a", "b"), t, np.zeros((5000, 2)), np.ones((5000, 2)),
+                            [onsets, []])  # fmt: skip
+
+    on_it = det([1.06])
+    assert rd.score([on_it], [rec]).found == 1
+    assert (rd.by_chance([on_it], [rec]).found, rd.by_chance([on_it], [rec]).pulses) == (0, 1)
+    storm = det(list(np.arange(0.0, 10.0, 0.1)))
+    assert rd.by_chance([storm], [rec], joint=0).recall == 1.0
+    assert rd.by_chance([storm], [rec], joint=0).pulses == 1
+
+
 def simulated(model: RobotModel, seconds: float, phase: float, pulses: list[tuple[int, float]]
               ) -> JointRecording:  # fmt: skip
     """The true chain's run at 1 kHz, the motors 4 ms late, 0.4 N m pushes of 0.3 s."""
@@ -180,6 +200,7 @@ def test_calibrate_and_detect_on_the_real_double_pendulum_from_the_command_line(
     out = capsys.readouterr().out
     assert "pendubot_pert_01 Joint1: contact onsets at [s]" in out
     assert "Joint2: " in out and " pulses found, " in out and "false alarms" in out
+    assert "of the pulses would be found by chance" in out
     assert (tmp_path / "pendubot_pert_01.png").stat().st_size > 10_000
     assert main(args) == 2
     assert "--method momentum_observer needs --calibration" in capsys.readouterr().err

@@ -15,13 +15,14 @@ threshold (onset at 1, release at 0.5). Scoring per joint: a labelled pulse is a
 where the true external torque is at least ``PULSE_LEVEL_NM``; it is found when an onset falls
 between its start and ``GRACE_S`` after its end; the delay is counted from the first sample at
 half the pulse's peak. Any other onset is a false alarm; onsets within ``ALARM_MERGE_S`` of the
-previous one are one alarm.
+previous one are one alarm. A detector that alarms often finds pulses by chance: :func:`by_chance`
+scores the same onsets against the labels moved in time, the recall to beat.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -37,6 +38,7 @@ PULSE_LEVEL_NM = 0.05
 GRACE_S = 0.1
 ALARM_MERGE_S = 0.2
 TEXTBOOK_MARGIN = 1.01  # "just above" the largest residual without contact
+CHANCE_SHIFTS_S = (1.3, 2.6, 3.9)  # the labels moved in time (circularly within a recording)
 
 
 @dataclass
@@ -192,3 +194,29 @@ def score(
                 total.false_alarms += 1 + int(np.count_nonzero(np.diff(alarms) > ALARM_MERGE_S))
     total.judged_share = judged / samples if samples else float("nan")
     return total
+
+
+def by_chance(
+    detections: Sequence[Detection],
+    recordings: Sequence[JointRecording],
+    joint: int | None = None,
+    shifts_s: Sequence[float] = CHANCE_SHIFTS_S,
+) -> Score:
+    """What these onsets find by chance: scored against each recording's labels moved
+    ``shifts_s`` later (wrapping round), the pulses and those found averaged over the shifts
+    (rounded). Its recall is the one a detector must beat to have seen anything."""
+    scores = []
+    for shift in shifts_s:
+        moved = []
+        for rec in recordings:
+            if rec.label is None:
+                moved.append(rec)
+                continue
+            step = float(np.median(np.diff(rec.stamps_ns))) * 1e-9
+            moved.append(replace(rec, label=np.roll(rec.label, round(shift / step), axis=0)))
+        scores.append(score(detections, moved, joint))
+    out = Score(minutes=scores[0].minutes, judged_share=scores[0].judged_share)
+    out.pulses = round(float(np.mean([s.pulses for s in scores])))
+    out.found = round(float(np.mean([s.found for s in scores])))
+    out.false_alarms = round(float(np.mean([s.false_alarms for s in scores])))
+    return out

@@ -184,8 +184,16 @@ def run_detect(args: argparse.Namespace) -> int:
         joint: rd.score(detections, recordings, joint=j)
         for j, joint in enumerate(model.joint_names)
     }
+    chance = {
+        joint: rd.by_chance(detections, recordings, joint=j).recall
+        for j, joint in enumerate(model.joint_names)
+    }
     if args.json:
-        json.dump({j: _as_dict(s) for j, s in scores.items()}, sys.stdout, indent=2)
+        json.dump(
+            {j: {**_as_dict(s), "recall_by_chance": chance[j]} for j, s in scores.items()},
+            sys.stdout,
+            indent=2,
+        )
         print()
         return 0
     for det in detections:
@@ -197,7 +205,9 @@ def run_detect(args: argparse.Namespace) -> int:
             print(
                 f"{joint}: {s.found}/{s.pulses} pulses found, {s.false_alarms} false alarms "
                 f"({s.alarms_per_minute:.1f} per minute), delay median "
-                f"{s.delay_s(50) * 1e3:.0f} ms, p90 {s.delay_s(90) * 1e3:.0f} ms"
+                f"{s.delay_s(50) * 1e3:.0f} ms, p90 {s.delay_s(90) * 1e3:.0f} ms; "
+                f"{chance[joint]:.0%} of the pulses would be found by chance (the same onsets "
+                "against the labels moved in time)"
             )
     return 0
 
