@@ -203,8 +203,8 @@ def by_chance(
     shifts_s: Sequence[float] = CHANCE_SHIFTS_S,
 ) -> Score:
     """What these onsets find by chance: scored against each recording's labels moved
-    ``shifts_s`` later (wrapping round), the pulses and those found averaged over the shifts
-    (rounded). Its recall is the one a detector must beat to have seen anything."""
+    ``shifts_s`` later (wrapping round), pulses, those found and alarms summed over the
+    shifts. Its recall is the one a detector must beat to have seen anything."""
     scores = []
     for shift in shifts_s:
         moved = []
@@ -215,8 +215,10 @@ def by_chance(
             step = float(np.median(np.diff(rec.stamps_ns))) * 1e-9
             moved.append(replace(rec, label=np.roll(rec.label, round(shift / step), axis=0)))
         scores.append(score(detections, moved, joint))
-    out = Score(minutes=scores[0].minutes, judged_share=scores[0].judged_share)
-    out.pulses = round(float(np.mean([s.pulses for s in scores])))
-    out.found = round(float(np.mean([s.found for s in scores])))
-    out.false_alarms = round(float(np.mean([s.false_alarms for s in scores])))
+    out = Score(judged_share=scores[0].judged_share)
+    for s in scores:
+        out.pulses += s.pulses
+        out.found += s.found
+        out.false_alarms += s.false_alarms
+        out.minutes += s.minutes
     return out
