@@ -4,10 +4,10 @@
 
 Nothing here comes from the package: not its dynamics (no Pinocchio), integrator, friction law,
 motor, sensors, controller or file writer. It reads only the DFKI lab's parameter file
-(../shared/external/double_pendulum/model_parameters.yml) and writes CSVs with the lab's
-column names, which is all another lab's robot would give this project; the detector gets the
-lab's URDF, with its real faults (inertias about the joint axes written as about the centres of
-mass, no rotor inertia: the mass matrix about 35 % too large).
+(test/data/double_pendulum/model_parameters.yml, a copy of the shared one) and writes CSVs
+with the lab's column names, which is all another lab's robot would give this project; the
+detector gets the lab's URDF, with its real faults (inertias about the joint axes written as
+about the centres of mass, no rotor inertia: the mass matrix about 35 % too large).
 
 The robot: the lab's double pendulum, both joints driven, in the lab's equations of motion
 (their README: M(q) q'' + C(q, q') q' - G(q) + F(q') = tau, F_i = b_i q'_i + cf_i atan(100 q'_i)),
@@ -42,8 +42,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "external" / "double_pendulum"
-PARAMS = SHARED / "model_parameters.yml"
+# the lab's files (parameter file, URDF), as kept in this repository with their licence
+LAB = Path(__file__).resolve().parents[1] / "test" / "data" / "double_pendulum"
+PARAMS = LAB / "model_parameters.yml"
 STEP_S = 2.5e-4  # integration step
 SUBSTEPS = 10  # per control period: 400 Hz
 DURATION_S = 10.0
@@ -261,7 +262,7 @@ def survey(directory: Path, runs: int, gain: float) -> dict[str, Any]:
     from transparency_ros.analysis.robot_data import read_joint_csv  # noqa: PLC0415
     from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
 
-    base = RobotModel.from_urdf(SHARED / "pendubot.urdf")
+    base = RobotModel.from_urdf(LAB / "pendubot.urdf")
     joints = list(base.joint_names)
     clean_files, pert_files = write_runs(directory, runs)
     clean = [read_joint_csv(f, joints) for f in clean_files]
