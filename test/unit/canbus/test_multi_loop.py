@@ -22,9 +22,8 @@ from transparency_ros.canbus.sim_device import (
     MoteusDevice,
     ODriveDevice,
     Personality,
-    SimulatedBus,
-    SimulatedBuses,
 )
+from transparency_ros.canbus.sim_robot import SimulatedBus, SimulatedBuses
 from transparency_ros.core.actuator_physics import ActuatorPhysics, PhysicsParams
 from transparency_ros.core.config import get_actuator
 from transparency_ros.core.driver import DriverCore, DriverMode, DriverSettings, JointTarget

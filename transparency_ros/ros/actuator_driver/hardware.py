@@ -21,12 +21,12 @@ from transparency_ros.canbus.sim_device import (
     ODriveDevice,
     Personality,
     SimulatedActuator,
-    SimulatedBus,
-    SimulatedBuses,
 )
+from transparency_ros.canbus.sim_robot import SimulatedBus, SimulatedBuses
 from transparency_ros.core.actuator_physics import ActuatorPhysics, Environment, PhysicsParams
 from transparency_ros.core.ball_on_rail import BallOnRail
 from transparency_ros.core.config import get_actuator, load_drop_test
+from transparency_ros.core.driver import DriverSettings
 from transparency_ros.core.drop_rig import DropRig, RigParams
 from transparency_ros.core.feel_cage_config import load_setup
 
@@ -169,3 +169,18 @@ def start_simulation(
         make_environment(v),
     )
     return SimulatedActuator(physics, personality, settings).start()
+
+
+def gain_error(proto: ActuatorProtocol | None, settings: DriverSettings) -> str | None:
+    """Why the gains cannot be sent to this protocol's device, or None."""
+    if isinstance(proto, MitProtocol):
+        kp = settings.k_s_nm_per_rad / proto.gear_ratio**2
+        kd = settings.k_d_nms_per_rad / proto.gear_ratio**2
+        if kp > proto.limits.kp_max or kd > proto.limits.kd_max:
+            return (
+                f"k_s/k_d exceed the motor's MIT range kp <= {proto.limits.kp_max}, "
+                f"kd <= {proto.limits.kd_max}"
+            )
+    if isinstance(proto, MoteusProtocol) and proto.kp_scale(settings.k_s_nm_per_rad) > 1.0:
+        return "k_s exceeds the moteus's configured kp (kp_scale would be > 1)"
+    return None

@@ -19,30 +19,24 @@ import time
 from dataclasses import replace
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
-from rclpy.utilities import ok as context_ok
-from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool, Trigger
 
 from transparency_ros.canbus.client import ActuatorClient, BusSettings
 from transparency_ros.canbus.clock import ClockOffset
-from transparency_ros.canbus.errors import CanProtocolError
 from transparency_ros.canbus.loop import ControlLoop
 from transparency_ros.canbus.multi import Motor, MultiControlLoop, RobotSample
 from transparency_ros.canbus.protocol import (
     ActuatorProtocol,
     Feedback,
-    MitProtocol,
-    MoteusProtocol,
 )
-from transparency_ros.canbus.sim_device import SimulatedActuator, SimulatedBus, SimulatedBuses
+from transparency_ros.canbus.sim_device import SimulatedActuator
+from transparency_ros.canbus.sim_robot import SimulatedBus, SimulatedBuses
 from transparency_ros.core import stamps
 from transparency_ros.core.cdr import encode_joint_state
 from transparency_ros.core.driver import (
@@ -61,20 +55,21 @@ from transparency_ros.ros.actuator_driver.diagnostics import (
 )
 from transparency_ros.ros.actuator_driver.hardware import (
     MotorSpec,
+    gain_error,
     make_protocol,
     motor_specs,
     start_simulated_buses,
     start_simulation,
 )
 from transparency_ros.ros.actuator_driver.parameters import (
-    DESCRIPTION,
     NODE_NAME,
     PARAMETERS,
     RUNTIME,
+    exit_logger,
     settings_value,
 )
 from transparency_ros.ros.conversions import stamp_to_s
-from transparency_ros.ros.params import choice_error, declare, parse_node_cli
+from transparency_ros.ros.params import choice_error, declare
 from transparency_ros.ros.sim_ball import SimBallInterface
 from transparency_ros.ros.sim_rig import SimRigInterface
 
@@ -188,7 +183,7 @@ class ActuatorDriverNode(LifecycleNode):
             except (SettingsError, ValueError) as err:
                 where = f"{joint}: " if joint else ""
                 return SetParametersResult(successful=False, reason=where + str(err))
-            reason = self._protocol_gain_error(trial, joint)
+            reason = self._protocolgain_error(trial, joint)
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
@@ -199,14 +194,14 @@ class ActuatorDriverNode(LifecycleNode):
             return next(m.core.settings for m in loop.motors if m.name == joint)
         return self.joint_settings(joint)
 
-    def _protocol_gain_error(self, settings: DriverSettings, joint: str | None) -> str | None:
+    def _protocolgain_error(self, settings: DriverSettings, joint: str | None) -> str | None:
         protocols = (
             [m.protocol for m in self.loop.motors if m.name == joint or joint is None]
             if isinstance(self.loop, MultiControlLoop)
             else [self.protocol]
         )
         for proto in protocols:
-            reason = _gain_error(proto, settings)
+            reason = gain_error(proto, settings)
             if reason:
                 return reason
         return None
@@ -251,7 +246,7 @@ class ActuatorDriverNode(LifecycleNode):
         else:
             reason = next(
                 (f"{s.joint}: {r}" for s, p, c in zip(self.specs, protocols, settings, strict=True)
-                 if (r := _gain_error(p, c))), None)  # fmt: skip
+                 if (r := gain_error(p, c))), None)  # fmt: skip
         if reason:
             self.get_logger().error(f"configure failed: {reason}")
             for bus in buses:
@@ -323,7 +318,7 @@ class ActuatorDriverNode(LifecycleNode):
             self.get_logger().error(f"configure failed: {err}")
             self._close()
             return TransitionCallbackReturn.FAILURE
-        reason = _gain_error(protocol, self.core.settings)
+        reason = gain_error(protocol, self.core.settings)
         if reason:
             self.get_logger().error(f"configure failed: {reason}")
             self._close()
@@ -405,14 +400,14 @@ class ActuatorDriverNode(LifecycleNode):
             self._sim_runner.stop()
             self._sim_runner = None
             left = [p.is_enabled() for sim in self.sim_buses for p in sim.personalities]
-            _exit_logger().info(f"simulated motors enabled at exit: {sum(left)} of {len(left)}")
+            exit_logger().info(f"simulated motors enabled at exit: {sum(left)} of {len(left)}")
             self.sim_buses = []
         if self.sim is not None:
             time.sleep(0.01)  # let the device take the last frames
             self.sim.stop()
             seen = ", ".join(f"{k}={v}" for k, v in sorted(self.sim.events.items()))
             driven = self.sim.personality.is_enabled()
-            _exit_logger().info(f"simulated actuator saw: {seen}; motor enabled at exit: {driven}")
+            exit_logger().info(f"simulated actuator saw: {seen}; motor enabled at exit: {driven}")
             self.sim = None
         self.loop = None
 
@@ -597,53 +592,3 @@ class ActuatorDriverNode(LifecycleNode):
         array = DiagnosticArray(status=statuses)
         array.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(array)
-
-
-def _gain_error(proto: ActuatorProtocol | None, settings: DriverSettings) -> str | None:
-    """Why the gains cannot be sent to this protocol's device, or None."""
-    if isinstance(proto, MitProtocol):
-        kp = settings.k_s_nm_per_rad / proto.gear_ratio**2
-        kd = settings.k_d_nms_per_rad / proto.gear_ratio**2
-        if kp > proto.limits.kp_max or kd > proto.limits.kd_max:
-            return (
-                f"k_s/k_d exceed the motor's MIT range kp <= {proto.limits.kp_max}, "
-                f"kd <= {proto.limits.kd_max}"
-            )
-    if isinstance(proto, MoteusProtocol) and proto.kp_scale(settings.k_s_nm_per_rad) > 1.0:
-        return "k_s exceeds the moteus's configured kp (kp_scale would be > 1)"
-    return None
-
-
-def _exit_logger() -> Any:
-    """A logger for the last words: the node's own also publishes to /rosout, which is gone
-    once a signal has shut the context down (rcl then prints "Failed to publish log message to
-    rosout")."""
-    return rclpy.logging.get_logger(f"{NODE_NAME}.exit")
-
-
-def main(args: list[str] | None = None) -> int:
-    parse_node_cli(NODE_NAME, DESCRIPTION, PARAMETERS, args)
-    rclpy.init(args=args)
-    node: ActuatorDriverNode | None = None
-    try:
-        node = ActuatorDriverNode()
-        executor = MultiThreadedExecutor(num_threads=2)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except _rclpy.RCLError:
-        # a signal can shut the context down while a MultiThreadedExecutor worker rebuilds its
-        # wait set ("the given context is not valid"): that is the same shutdown, not a failure
-        if context_ok():
-            raise
-    except (CanProtocolError, TransparencyError) as err:
-        print(f"{NODE_NAME}: error: {err}", file=sys.stderr)  # noqa: T201
-        return 2
-    finally:
-        if node is not None:
-            node.make_safe()
-            _exit_logger().info("shut down: motor disabled, bus closed")
-            node.destroy_node()
-        try_shutdown()
-    return 0

@@ -264,3 +264,12 @@ DESCRIPTION = (
     "autostart it configures and activates itself. Services: ~/set_zero (std_srvs/Trigger), "
     "~/enable (std_srvs/SetBool). Default: a simulated U10DD on a virtual bus."
 )
+
+
+def exit_logger() -> Any:
+    """A logger for the last words: the node's own also publishes to /rosout, which is gone
+    once a signal has shut the context down (rcl then prints "Failed to publish log message to
+    rosout")."""
+    import rclpy.logging  # noqa: PLC0415 - the parameter table itself needs no rclpy
+
+    return rclpy.logging.get_logger(f"{NODE_NAME}.exit")
