@@ -284,8 +284,6 @@ def _methods(
 ) -> dict[str, Any]:  # fmt: skip
     """Per detector: pooled scores per joint on the disturbed and held-out clean runs, and the
     held-out clean runs' residual (RMS, peak) per joint."""
-    from pendubot_detection import pooled  # noqa: PLC0415
-
     from transparency_ros.analysis import robot_detect as rd  # noqa: PLC0415
     from transparency_ros.analysis.robot_calibration import calibrate  # noqa: PLC0415
 
@@ -318,7 +316,7 @@ def _methods(
     out: dict[str, Any] = {}
     for name in methods:
         out[name + suffix] = {
-            key: [pooled([fold[j] for fold in scores[name][key]]) for j in range(len(joints))]
+            key: [rd.pooled([fold[j] for fold in scores[name][key]]) for j in range(len(joints))]
             for key in ("held_clean", "pert")
         }
         residual = np.concatenate(floor[name])

@@ -31,8 +31,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from transparency_ros.analysis import robot_detect as rd
 from transparency_ros.analysis.robot_calibration import calibrate
 from transparency_ros.analysis.robot_data import read_joint_csv
@@ -42,19 +40,6 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _results import write_results
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "external" / "double_pendulum"
-
-
-def pooled(scores: list[rd.Score]) -> rd.Score:
-    out = rd.Score()
-    for s in scores:
-        out.pulses += s.pulses
-        out.found += s.found
-        out.false_alarms += s.false_alarms
-        out.minutes += s.minutes
-        out.delays_s += s.delays_s
-        out.missed += s.missed
-    out.judged_share = float(np.mean([s.judged_share for s in scores]))
-    return out
 
 
 def run_gain(base: RobotModel, clean: list[Any], pert: list[Any], gain: float) -> dict[str, Any]:
@@ -76,7 +61,7 @@ def run_gain(base: RobotModel, clean: list[Any], pert: list[Any], gain: float) -
         detections = [rd.with_threshold(r, rd.textbook_residual(base, r, gain), tb) for r in pert]
         rows["textbook"]["pert"].append(rd.score(detections, pert))
         rows["textbook"]["chance"].append(rd.by_chance(detections, pert))
-    return {m: {k: pooled(v) for k, v in parts.items() if v} for m, parts in rows.items()}
+    return {m: {k: rd.pooled(v) for k, v in parts.items() if v} for m, parts in rows.items()}
 
 
 def cells(s: rd.Score | None, labelled: bool) -> str:

@@ -94,21 +94,26 @@ class JointRecording:
         return float(self.stamps_ns[-1] - self.stamps_ns[0]) * 1e-9
 
 
+def read_text(path: Path) -> str:
+    """The text of a file, plain or ``.xz``-compressed; a ConfigError naming it if unreadable."""
+    try:
+        if path.suffix == ".xz":
+            with lzma.open(path, "rb") as f:
+                raw = f.read()
+        else:
+            raw = path.read_bytes()
+    except (OSError, lzma.LZMAError) as err:
+        raise ConfigError(f"{path}: cannot read: {err}") from err
+    return raw.decode("utf-8", errors="replace")
+
+
 def read_joint_csv(
     path: str | Path, joints: Sequence[str], columns: Columns | None = None
 ) -> JointRecording:
     """The recording in ``path``; column k (1-based) of each pattern is ``joints[k - 1]``."""
     cols = columns or Columns()
     p = Path(path)
-    try:
-        if p.suffix == ".xz":
-            with lzma.open(p, "rb") as f:
-                raw = f.read()
-        else:
-            raw = p.read_bytes()
-    except (OSError, lzma.LZMAError) as err:
-        raise ConfigError(f"{p}: cannot read: {err}") from err
-    reader = csv.reader(io.StringIO(raw.decode("utf-8", errors="replace")))
+    reader = csv.reader(io.StringIO(read_text(p)))
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration as err:

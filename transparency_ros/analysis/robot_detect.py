@@ -215,10 +215,19 @@ def by_chance(
             step = float(np.median(np.diff(rec.stamps_ns))) * 1e-9
             moved.append(replace(rec, label=np.roll(rec.label, round(shift / step), axis=0)))
         scores.append(score(detections, moved, joint))
-    out = Score(judged_share=scores[0].judged_share)
+    return pooled(scores)
+
+
+def pooled(scores: Sequence[Score]) -> Score:
+    """Several scores as one: counts, minutes, delays and misses summed, the judged share
+    averaged."""
+    out = Score()
     for s in scores:
         out.pulses += s.pulses
         out.found += s.found
         out.false_alarms += s.false_alarms
         out.minutes += s.minutes
+        out.delays_s += s.delays_s
+        out.missed += s.missed
+    out.judged_share = float(np.mean([s.judged_share for s in scores])) if scores else 0.0
     return out

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import io
 import json
-import lzma
 import sys
 from pathlib import Path
 from typing import Any
@@ -82,6 +81,7 @@ def register(subparsers: Any) -> None:
 
 
 def run_import(args: argparse.Namespace) -> int:
+    from transparency_ros.analysis.robot_data import read_text  # noqa: PLC0415
     from transparency_ros.bag.writer import (  # noqa: PLC0415
         BagWriter,
         check_writable,
@@ -98,15 +98,11 @@ def run_import(args: argparse.Namespace) -> int:
     check_writable(out)
     types = message_types()
     for path in map(Path, args.csv):
+        text = read_text(path)
         try:
-            if path.suffix == ".xz":
-                with lzma.open(path, "rt") as f:
-                    text = f.read()
-            else:
-                text = path.read_text()
             header = text.splitlines()[0].split(",")
             data = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
-        except (OSError, ValueError, IndexError, lzma.LZMAError) as err:
+        except (ValueError, IndexError) as err:
             raise ConfigError(f"{path}: cannot read CSV: {err}") from err
         missing = [n for n in names if n not in header]
         if missing:

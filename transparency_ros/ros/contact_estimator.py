@@ -226,18 +226,25 @@ def observer_settings(values: dict[str, Any]) -> DetectorSettings:
     ).validated()
 
 
-def observer_pipeline(values: dict[str, Any]) -> ObserverPipeline:
-    """The ``momentum_observer`` method's pipeline: a clear ConfigError for a missing or bad
-    URDF, or a calibration from another robot."""
+def load_calibration(values: dict[str, Any]) -> Any:
+    """The ``calibration_file``'s calibration, None without one; a ConfigError naming a file
+    that is missing or not a calibration."""
     from transparency_ros.core.robot_calibration import Calibration  # noqa: PLC0415
+
+    return Calibration.load(values["calibration_file"]) if values["calibration_file"] else None
+
+
+def observer_pipeline(values: dict[str, Any], calibration: Any = None) -> ObserverPipeline:
+    """The ``momentum_observer`` method's pipeline, with ``calibration`` (default: loaded from
+    ``calibration_file``): a clear ConfigError for a missing or bad URDF, or a calibration from
+    another robot."""
     from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
 
     if not values["robot_description"].strip():
         raise ConfigError("method momentum_observer needs a URDF (robot_description is empty)")
     model = RobotModel.from_urdf(values["robot_description"])
-    calibration = (
-        Calibration.load(values["calibration_file"]) if values["calibration_file"] else None
-    )
+    if calibration is None:
+        calibration = load_calibration(values)
     return ObserverPipeline(
         model,
         values["observer_gain_per_s"],
@@ -254,15 +261,12 @@ class ContactEstimatorNode(Node):
         joints = frozenset(j for j in self.values["joints"] if j)
         self.pipeline: EstimatorPipeline | ObserverPipeline | AwaitingModel
         self._description = ""  # the URDF the observer was built from, if from the topic
+        self._calibration: Any = None  # loaded at start when the URDF is to come by topic
         if self.values["method"] == "momentum_observer" and self.values["robot_description"]:
             self.pipeline = observer_pipeline(self.values)
         elif self.values["method"] == "momentum_observer":
-            if self.values["calibration_file"]:  # a bad file is refused now, not on arrival
-                from transparency_ros.core.robot_calibration import (  # noqa: PLC0415
-                    Calibration,
-                )
-
-                Calibration.load(self.values["calibration_file"])
+            # a bad calibration file is refused now, not when the URDF comes
+            self._calibration = load_calibration(self.values)
             self.pipeline = AwaitingModel()
             self.create_subscription(String, "/robot_description", self._on_description, LATCHED)
         else:
@@ -369,7 +373,8 @@ class ContactEstimatorNode(Node):
         if msg.data == self._description:
             return
         try:
-            pipeline = observer_pipeline({**self.values, "robot_description": msg.data})
+            values = {**self.values, "robot_description": msg.data}
+            pipeline = observer_pipeline(values, self._calibration)
         except (ConfigError, EstimatorError) as err:
             self.get_logger().error(f"/robot_description not used: {err}")
             return
