@@ -73,7 +73,14 @@ from transparency_ros.core.robot_pipeline import AwaitingModel, ObserverPipeline
 from transparency_ros.ros import in_process
 from transparency_ros.ros.conversions import stamp_to_ns
 from transparency_ros.ros.hot_path import Delivery, HotPath
-from transparency_ros.ros.params import ParamSpec, choice_error, declare, run_node
+from transparency_ros.ros.params import (
+    ParamSpec,
+    accept_integers_for_doubles,
+    check_unknown,
+    choice_error,
+    declare,
+    run_node,
+)
 
 NODE_NAME = "contact_estimator"
 METHODS = ("position_error", "momentum_observer")
@@ -258,6 +265,15 @@ class ContactEstimatorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.values = declare(self, PARAMETERS)
+        check_unknown(self, refuse=False)  # it commands nothing: run on, with a warning
+        accept_integers_for_doubles(self, PARAMETERS)
+        if self.values["method"] != "momentum_observer":
+            unused = [n for n in ("robot_description", "calibration_file") if self.values[n]]
+            if unused:
+                self.get_logger().warning(
+                    f"{', '.join(unused)} ignored: only method:=momentum_observer uses them "
+                    f"(method is {self.values['method']})"
+                )
         joints = frozenset(j for j in self.values["joints"] if j)
         self.pipeline: EstimatorPipeline | ObserverPipeline | AwaitingModel
         self._description = ""  # the URDF the observer was built from, if from the topic

@@ -39,7 +39,7 @@ from transparency_ros.core.config import get_actuator
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.feel_cage_config import load_setup
 from transparency_ros.ros.conversions import stamp_to_s
-from transparency_ros.ros.params import ParamSpec, declare, run_node
+from transparency_ros.ros.params import ParamSpec, check_unknown, declare, run_node
 
 NODE_NAME = "feel_cage_behavior"
 P = ParamSpec
@@ -126,6 +126,7 @@ class FeelCageBehaviorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.values = declare(self, parameters())
+        check_unknown(self, refuse=True)  # it sends /joint_commands: refused at start
         actuator = get_actuator(self.values["actuator"])
         self.config = fc.FeelCageConfig(
             sweep_speed_rad_s=self.values["sweep_speed_rad_s"],

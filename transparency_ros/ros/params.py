@@ -16,11 +16,17 @@ from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args, try_shutdown
 
-from transparency_ros.core.errors import TransparencyError
+from transparency_ros.core.errors import ConfigError, TransparencyError
+
+
+class ParameterError(ConfigError):
+    """A node parameter whose value (or name) the node does not know; the message names it."""
 
 
 @dataclass(frozen=True)
@@ -32,6 +38,23 @@ class ParamSpec:
     low: float | None = None
     high: float | None = None
     choices: Sequence[str] = ()
+
+    def error(self, value: Any) -> str | None:
+        """Why ``value`` is not one this parameter accepts (choices), or None."""
+        if self.choices and value not in self.choices:
+            return f"{self.name} must be one of {list(self.choices)}, got {value!r}"
+        return None
+
+    def accepts(self) -> str:
+        """What this parameter accepts, in words."""
+        kind = {bool: "a bool", int: "an integer", float: "a number", str: "a string"}.get(
+            type(self.default), f"a list like {self.default!r}"
+        )
+        if self.choices:
+            return f"one of {list(self.choices)}"
+        if self.low is not None and self.high is not None and not isinstance(self.default, bool):
+            return f"{kind} in [{self.low:g}, {self.high:g}]"
+        return kind
 
     def descriptor(self) -> ParameterDescriptor:
         desc = ParameterDescriptor(description=self.description, read_only=self.read_only)
@@ -53,20 +76,82 @@ class ParamSpec:
         return desc
 
 
+def _is_double(spec: ParamSpec) -> bool:
+    return isinstance(spec.default, float)
+
+
+def _as_double(param: Parameter) -> Parameter:
+    """An integer given for a double parameter (``k_s:=5``, as ROS users type it) as a double;
+    anything else unchanged (a wrong type is then refused by rclpy, and named by us)."""
+    if param.type_ == Parameter.Type.INTEGER:
+        return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
+    return param
+
+
 def declare(node: Node, specs: Iterable[ParamSpec]) -> dict[str, Any]:
-    """Declare every spec on ``node``; return {name: value} as given (overrides included)."""
+    """Declare every spec on ``node``; return {name: value} as given (overrides included).
+
+    An integer override of a double parameter is taken as the double it means. A value of the
+    wrong type, out of range or not one of the parameter's choices raises :class:`ParameterError`
+    naming the parameter and what it accepts: a node never starts on a value it does not know.
+    """
     values: dict[str, Any] = {}
+    overrides: dict[str, Parameter] = getattr(node, "_parameter_overrides", {})
     for spec in specs:
-        param = node.declare_parameter(spec.name, spec.default, spec.descriptor())
+        if _is_double(spec) and spec.name in overrides:
+            overrides[spec.name] = _as_double(overrides[spec.name])
+        try:
+            param = node.declare_parameter(spec.name, spec.default, spec.descriptor())
+        except ParameterException as err:
+            given = overrides.get(spec.name)
+            shown = f"{given.value!r} ({given.type_.name.lower()})" if given else "a value"
+            raise ParameterError(
+                f"parameter {spec.name}: got {shown}, expected {spec.accepts()}"
+            ) from err
+        reason = spec.error(param.value)
+        if reason:
+            raise ParameterError(f"parameter {reason}")
         values[spec.name] = param.value
     return values
+
+
+def accept_integers_for_doubles(node: Node, specs: Iterable[ParamSpec]) -> None:
+    """At runtime too (``ros2 param set /node k_s 5``): an integer for a double is a double."""
+    doubles = {spec.name for spec in specs if _is_double(spec)}
+
+    def convert(params: list[Parameter]) -> list[Parameter]:
+        return [_as_double(p) if p.name in doubles else p for p in params]
+
+    node.add_pre_set_parameters_callback(convert)
+
+
+def unknown_overrides(node: Node) -> list[str]:
+    """Parameters given to ``node`` (``-p``, a parameter file) that it never declared: a
+    misspelt name would otherwise leave the default in force without a word."""
+    overrides: dict[str, Parameter] = getattr(node, "_parameter_overrides", {})
+    return sorted(
+        name
+        for name in overrides
+        if not node.has_parameter(name) and not name.startswith("qos_overrides.")
+    )
+
+
+def check_unknown(node: Node, *, refuse: bool) -> None:
+    """Refuse (nodes that command motors) or warn about parameters the node does not know."""
+    unknown = unknown_overrides(node)
+    if not unknown:
+        return
+    text = f"unknown parameter(s) {unknown} (see --help for this node's parameters)"
+    if refuse:
+        raise ParameterError(text)
+    node.get_logger().warning(text + ": ignored")
 
 
 def choice_error(specs: Iterable[ParamSpec], name: str, value: Any) -> str | None:
     """Reason a string parameter's value is not one of its choices, or None."""
     for spec in specs:
-        if spec.name == name and spec.choices and value not in spec.choices:
-            return f"{name} must be one of {list(spec.choices)}, got {value!r}"
+        if spec.name == name:
+            return spec.error(value)
     return None
 
 

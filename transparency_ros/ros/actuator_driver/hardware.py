@@ -10,6 +10,7 @@ from transparency_ros.canbus import mit
 from transparency_ros.canbus.client import BusSettings
 from transparency_ros.canbus.errors import BusError
 from transparency_ros.canbus.protocol import (
+    PROTOCOLS,
     ActuatorProtocol,
     MitProtocol,
     MoteusProtocol,
@@ -118,6 +119,8 @@ def make_protocol(v: dict[str, Any]) -> tuple[ActuatorProtocol, Personality]:
         return ODriveProtocol(v["motor_id"], gear_ratio=g), ODriveDevice(
             v["motor_id"], gear_ratio=g
         )
+    if v["protocol"] != "moteus":  # the parameter table refuses it first; never a default
+        raise ValueError(f"protocol must be one of {list(PROTOCOLS)}, got {v['protocol']!r}")
     kp, kd = v["moteus.kp_nm_per_rev"], v["moteus.kd_nms_per_rev"]
     return (
         MoteusProtocol(
@@ -144,8 +147,13 @@ def make_environment(v: dict[str, Any]) -> Environment | None:
                 seed=v["sim_rig_seed"],
             )
         )
-    if v["sim_environment"] != "ball_on_rail":
+    if v["sim_environment"] == "free":
         return None
+    if v["sim_environment"] != "ball_on_rail":
+        raise ValueError(
+            "sim_environment must be one of ['free', 'ball_on_rail', 'drop_rig'], got "
+            f"{v['sim_environment']!r}"
+        )
     setup = load_setup()
     return BallOnRail(setup.balls[v["sim_ball"]], setup.geometry, placed=v["sim_place_ball"])
 

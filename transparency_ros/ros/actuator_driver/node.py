@@ -69,7 +69,12 @@ from transparency_ros.ros.actuator_driver.parameters import (
     settings_value,
 )
 from transparency_ros.ros.conversions import stamp_to_s
-from transparency_ros.ros.params import choice_error, declare
+from transparency_ros.ros.params import (
+    accept_integers_for_doubles,
+    check_unknown,
+    choice_error,
+    declare,
+)
 from transparency_ros.ros.sim_ball import SimBallInterface
 from transparency_ros.ros.sim_rig import SimRigInterface
 
@@ -83,11 +88,6 @@ class ActuatorDriverNode(LifecycleNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.values = declare(self, PARAMETERS)
-        if self.values["gil_switch_interval_s"] > 0:
-            sys.setswitchinterval(self.values["gil_switch_interval_s"])
-            self.get_logger().info(
-                f"process thread switch interval set to {sys.getswitchinterval() * 1e6:.0f} us"
-            )
         self.core = DriverCore(DriverSettings(**{
             field: settings_value(name, self.values[name]) for name, field in RUNTIME.items()
         }))  # fmt: skip
@@ -95,12 +95,23 @@ class ActuatorDriverNode(LifecycleNode):
         self.joint_names: list[str] = []
         with contextlib.suppress(ValueError):  # a bad list is reported by configure
             self.joint_names = [spec.joint for spec in motor_specs(self.values)]
+        specs = list(PARAMETERS)
         for joint in self.joint_names:
-            self.values.update(declare(self, [
+            per_joint = [
                 replace(spec, name=f"{joint}.{spec.name}", default=self.values[spec.name],
                         description=f"{joint}: {spec.description}")
                 for spec in PARAMETERS if spec.name in RUNTIME
-            ]))  # fmt: skip
+            ]  # fmt: skip
+            self.values.update(declare(self, per_joint))
+            specs += per_joint
+        # a misspelt name would leave a default in force on a motor: refused at start
+        check_unknown(self, refuse=True)
+        accept_integers_for_doubles(self, specs)
+        if self.values["gil_switch_interval_s"] > 0:
+            sys.setswitchinterval(self.values["gil_switch_interval_s"])
+            self.get_logger().info(
+                f"process thread switch interval set to {sys.getswitchinterval() * 1e6:.0f} us"
+            )
         self.protocol: ActuatorProtocol | None = None
         self.client: ActuatorClient | None = None
         self.sim: SimulatedActuator | None = None
