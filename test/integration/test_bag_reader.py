@@ -62,8 +62,10 @@ def test_joint_state_arrays_from_a_humble_mcap() -> None:
 
 
 def test_clear_errors_name_the_bag_and_topic() -> None:
-    with pytest.raises(BagReadError, match="wrong_format"):
+    with pytest.raises(BagReadError, match="wrong_format") as wrong:
         open_bag(BAGS / "rosbag2_jazzy_mcap_wrong_serialization_format_v6").__enter__()
+    assert "salvage" not in str(wrong.value)  # salvage cannot help there: it is not damage
+    assert "Only cdr bags can be read" in str(wrong.value)
     with open_bag(BAGS / "rosbag2_foxy_sqlite3_cdr_test_v4") as bag:  # no embedded definitions
         with pytest.raises(BagReadError, match=r"/test_topic: unknown message type test_msgs"):
             list(bag.messages(["/test_topic"]))

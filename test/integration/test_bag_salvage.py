@@ -314,3 +314,73 @@ def test_damaged_values_sqlite_still_reads_are_skipped_by_name(tmp_path: Path) -
     assert _salvaged(tmp_path / "out") == [m for i, m in enumerate(written, 1) if i not in (3, 4)]
     assert "bag.db3: 2 message rows with damaged values; skipped" in report.damage
     assert any("type 42 not writable" in d for d in report.damage), report.damage
+
+
+# ------------------------------------------------------------------ compressed bags (real ones)
+
+BAGS = Path(__file__).resolve().parents[1] / "data" / "external_bags"
+HUMBLE = {  # rosbag2's own test bags, humble: zstd per message and per file
+    "message": ("rosbag2_humble_sqlite3_zstd_message_compression_v4",
+                {"/rosout": 758, "/topic": 369}),
+    "file": ("rosbag2_humble_sqlite3_zstd_file_compression_v4", {"/rosout": 392, "/topic": 383}),
+}  # fmt: skip
+
+
+def _strings_by_rosbags(bag: Path, topic: str) -> list[str]:
+    """The /topic strings read by rosbags itself (not our reader): what any tool would see."""
+    from rosbags.rosbag2 import Reader  # noqa: PLC0415
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(bag) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        return [store.deserialize_cdr(raw, c.msgtype).data
+                for c, _t, raw in reader.messages(connections=conns)]  # fmt: skip
+
+
+@pytest.mark.parametrize("mode", ["message", "file"])
+def test_compressed_bags_are_salvaged_into_bags_any_reader_reads(mode: str, tmp_path: Path) -> None:
+    """Salvage once kept the zstd frames and wrote "uncompressed": nothing could read it. The
+    source is only read: nothing is written beside it."""
+    name, counts = HUMBLE[mode]
+    source = tmp_path / "source"
+    shutil.copytree(BAGS / name, source)
+    before = sorted(p.name for p in source.iterdir())
+    report = salvage(source, tmp_path / "out")
+    assert sorted(p.name for p in source.iterdir()) == before  # no -wal/-shm beside the bag
+    assert report.out == tmp_path / "out" and dict(report.kept) == counts, report.damage
+    assert report.damage == []
+    original = _strings_by_rosbags(source, "/topic")
+    assert len(original) == counts["/topic"]
+    assert _strings_by_rosbags(tmp_path / "out", "/topic") == original
+
+
+def test_a_truncated_compressed_file_keeps_what_decompresses(tmp_path: Path) -> None:
+    name, _ = HUMBLE["file"]
+    bag = tmp_path / "bag"
+    shutil.copytree(BAGS / name, bag)
+    first = sorted(bag.glob("*.db3.zstd"))[0]
+    data = first.read_bytes()
+    first.chmod(0o644)
+    first.write_bytes(data[: len(data) * 2 // 3])
+    report = salvage(bag, tmp_path / "out")
+    assert report.out is not None and 0 < report.total < 775
+    assert any(d.startswith(f"{first.name}: zstd stream cut inside a frame") for d in report.damage)
+    with open_bag(tmp_path / "out") as out:  # proven readable
+        assert sum(1 for _ in out.messages(list(report.kept))) == report.total
+
+
+def test_a_payload_that_does_not_decompress_is_left_out_and_counted(tmp_path: Path) -> None:
+    name, counts = HUMBLE["message"]
+    bag = tmp_path / "bag"
+    shutil.copytree(BAGS / name, bag)
+    first = sorted(bag.glob("*.db3"))[0]
+    first.chmod(0o644)
+    with sqlite3.connect(first) as db:
+        (topic_id,) = db.execute("SELECT id FROM topics WHERE name = '/topic'").fetchone()
+        (row,) = db.execute(
+            "SELECT min(id) FROM messages WHERE topic_id = ?", (topic_id,)
+        ).fetchone()
+        db.execute("UPDATE messages SET data = ? WHERE id = ?", (b"\x28\xb5\x2f\xfdgarbage", row))
+    report = salvage(bag, tmp_path / "out")
+    assert report.kept["/topic"] == counts["/topic"] - 1 and report.kept["/rosout"] == 758
+    assert any(d.startswith("topic /topic: 1 message(s) do not decompress") for d in report.damage)

@@ -93,15 +93,25 @@ def test_command_watchdog(action: TimeoutAction) -> None:
     assert fresh is not None and fresh.position_rad == 0.2 and not core.status.command_timed_out
 
 
-def test_reply_watchdog_trips_at_exactly_the_configured_count() -> None:
-    core = DriverCore(DriverSettings(max_missed_replies=3))
+def test_reply_watchdog_trips_on_silence_over_enough_requests() -> None:
+    """Silent = no reply for reply_silence_s since the first unanswered request, over at least
+    min_unanswered requests: a stall of the host, during which nothing was asked, is not."""
+    core = DriverCore(DriverSettings(reply_silence_s=0.010))
     core.activate(0.0)
-    assert [core.on_missed_reply() for _ in range(2)] == [False, False]
-    core.on_feedback(0.0)  # a reply resets the run
-    assert [core.on_missed_reply() for _ in range(3)] == [False, False, True]
-    assert core.mode is DriverMode.FAULT and "3 replies missed" in core.status.fault_reason
-    assert core.command(0.0) is None
-    assert core.status.missed_replies_total == 5
+    assert [core.on_missed_reply(t, 3) for t in (0.000, 0.004)] == [False, False]
+    core.on_feedback(0.0, 0.006)  # a reply ends the silence
+    assert core.status.longest_silence_s == pytest.approx(0.006)
+    # the host stalls 0.5 s between two requests: long, but only two went unanswered
+    assert [core.on_missed_reply(t, 3) for t in (1.000, 1.500)] == [False, False]
+    core.on_feedback(0.0, 1.501)
+    assert core.mode is DriverMode.ACTIVE and core.status.longest_silence_s == pytest.approx(0.501)
+    # a motor that stays silent: 10 ms and at least 3 requests
+    times = [2.000, 2.002, 2.004, 2.006, 2.008, 2.011]
+    assert [core.on_missed_reply(t, 3) for t in times] == [False] * 5 + [True]
+    assert core.mode is DriverMode.FAULT
+    assert core.status.fault_reason == "no reply for 11 ms (6 requests unanswered)"
+    assert core.command(2.012) is None
+    assert core.status.missed_replies_total == 10
     core.deactivate()
     assert core.mode is DriverMode.FAULT  # only clear_fault (re-enable) leaves FAULT
     core.clear_fault()

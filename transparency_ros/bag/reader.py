@@ -108,6 +108,8 @@ class BagSource:
                 if path != self.path:
                     what = f"{self.path}: {doing}: file {path.name}: {_first_line(file_err)}"
                 break
+        if "serialization format" in what.lower():  # not damage: nothing to salvage
+            return f"{what}. Only cdr bags can be read (the format the recorder's middleware wrote)"
         return f"{what}. `transparency salvage {self.path}` copies what is readable"
 
     def __exit__(

@@ -13,6 +13,15 @@ each storage file record by record and keeps what it can:
 * **sqlite3**: the topics and message definitions, then the messages in blocks of ids; a block
   that sqlite cannot read is split until the unreadable ids are isolated.
 
+Compressed bags are salvaged too: a compressed storage file (rosbag2's ``FILE`` mode,
+``.db3.zstd``/``.mcap.zstd``) is decompressed as far as it goes into a temporary file and read
+as above; with ``MESSAGE`` compression (metadata.yaml) each payload is decompressed, and one that
+is not a whole zstd frame is left out and counted. The new bag is uncompressed.
+
+Only what is proven readable is kept and reported: every message is deserialized with its type
+before it is written, and the new bag is read back message by message before the salvage is
+reported; a bag that does not read back is removed, never left half-written.
+
 The salvaged messages are written with :class:`~transparency_ros.bag.writer.BagWriter` (MCAP,
 atomically) with the original ``custom_data`` (from metadata.yaml, else from the copy rosbag2
 keeps inside the storage), plus ``transparency.salvaged`` saying where from and what was lost.
@@ -31,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+import zstandard
 from mcap import records
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -38,7 +48,12 @@ from rosbags.typesys import Stores, get_typestore
 
 from transparency_ros.bag.errors import BagReadError
 from transparency_ros.bag.keys import SALVAGED_KEY
-from transparency_ros.bag.reader import STORAGE_SUFFIXES, normalise_type, register_definition
+from transparency_ros.bag.reader import (
+    STORAGE_SUFFIXES,
+    normalise_type,
+    open_bag,
+    register_definition,
+)
 from transparency_ros.bag.writer import BagWriter
 
 SQLITE_BLOCK = 1000  # message ids read at once
@@ -172,21 +187,27 @@ def _sqlite_items(path: Path, damage: list[str]) -> Iterator[tuple[str, Any]]:
 
 
 def _padded(path: Path, tmp: Path, damage: list[str]) -> Path:
-    """sqlite refuses a file shorter than its header says (a truncated bag) even where the pages
-    asked for are there: a copy padded with zero pages reads up to the missing ones."""
+    """A working copy in ``tmp`` (with the write-ahead log a crashed recorder may have left), so
+    that reading never writes beside the user's bag (sqlite makes -shm/-wal files even to read a
+    WAL database). sqlite refuses a file shorter than its header says (a truncated bag) even
+    where the pages asked for are there: the copy is padded with zero pages, and reads up to the
+    missing ones."""
+    copy = tmp / path.name
+    shutil.copyfile(path, copy)
+    wal = path.with_name(path.name + "-wal")
+    if wal.is_file():
+        shutil.copyfile(wal, tmp / wal.name)
     with path.open("rb") as f:
         header = f.read(100)
     size = path.stat().st_size
     if len(header) < 100 or not header.startswith(b"SQLite format 3\x00"):
-        return path
+        return copy
     page = int.from_bytes(header[16:18], "big")
     page = 65536 if page == 1 else page
     declared = int.from_bytes(header[28:32], "big") * page
     if size >= declared:
-        return path
+        return copy
     damage.append(f"{path.name}: ends at byte {size} of {declared} (truncated)")
-    copy = tmp / path.name
-    shutil.copyfile(path, copy)
     with copy.open("ab") as f:
         f.truncate(declared)
     return copy
@@ -348,10 +369,100 @@ def _metadata(bag: Path, damage: list[str]) -> tuple[dict[str, str] | None, dict
 # ------------------------------------------------------------------------------ salvage
 
 
+COMPRESSED_SUFFIX = ".zstd"  # rosbag2's file compression: <storage file>.zstd
+
+
+def _is_storage(path: Path) -> bool:
+    name = path.name.removesuffix(COMPRESSED_SUFFIX)
+    return Path(name).suffix in STORAGE_SUFFIXES
+
+
 def storage_files(bag: Path) -> list[Path]:
+    """A bag's storage files, compressed ones (``.db3.zstd``, ``.mcap.zstd``) included."""
     if bag.is_file():
         return [bag]
-    return sorted(p for p in bag.iterdir() if p.suffix in STORAGE_SUFFIXES)
+    return sorted(p for p in bag.iterdir() if _is_storage(p))
+
+
+def _message_compression(bag: Path) -> str:
+    """'zstd' when metadata.yaml says every message is compressed, else ''."""
+    try:
+        info = _bagfile_information(yaml.safe_load((bag / "metadata.yaml").read_text()))
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return ""
+    mode = str(info.get("compression_mode") or "").upper()
+    return str(info.get("compression_format") or "") if mode == "MESSAGE" else ""
+
+
+def _decompressed(path: Path, tmp: Path, damage: list[str]) -> Path | None:
+    """A ``.zstd`` storage file decompressed into ``tmp`` as far as it goes (None: nothing).
+    A stream cut inside a frame keeps what its whole blocks gave; the damage says so."""
+    out = tmp / path.name.removesuffix(COMPRESSED_SUFFIX)
+    written, problem = 0, ""
+    frame = zstandard.ZstdDecompressor().decompressobj()
+    in_frame = False
+    with path.open("rb") as src, out.open("wb") as dst:
+        try:
+            while chunk := src.read(1 << 20):
+                while chunk:
+                    block = frame.decompress(chunk)
+                    dst.write(block)
+                    written += len(block)
+                    in_frame = not frame.eof
+                    chunk = frame.unused_data if frame.eof else b""
+                    if frame.eof:
+                        frame = zstandard.ZstdDecompressor().decompressobj()
+        except zstandard.ZstdError as err:
+            problem = f"zstd stream damaged after {written} bytes ({_reason(err)})"
+    if in_frame and not problem:
+        problem = f"zstd stream cut inside a frame after {written} bytes"
+    if problem:
+        damage.append(f"{path.name}: {problem}" + ("; reading what came before" if written else ""))
+    return out if written else None
+
+
+class _Payloads:
+    """Each message's payload as written: decompressed (MESSAGE compression) and proven to
+    deserialize with its type; the ones that fail are counted per topic and left out."""
+
+    def __init__(self, types: _Types, compression: str) -> None:
+        self.types = types
+        self.decompressor = zstandard.ZstdDecompressor() if compression == "zstd" else None
+        self.msgtypes: dict[str, str] = {}
+        self.bad: Counter[str] = Counter()
+        self.why: dict[str, str] = {}
+
+    def readable(self, topic: str, data: bytes) -> bytes | None:
+        try:
+            if self.decompressor is not None:
+                data = self.decompressor.decompress(data)
+            self.types.store.deserialize_cdr(data, self.msgtypes[topic])
+        except Exception as err:  # noqa: BLE001 - any failure: this message is not readable
+            self.bad[topic] += 1
+            self.why.setdefault(topic, _reason(err))
+            return None
+        return data
+
+    def report(self, damage: list[str]) -> None:
+        for topic, count in sorted(self.bad.items()):
+            damage.append(
+                f"topic {topic}: {count} message(s) do not "
+                f"{'decompress and ' if self.decompressor else ''}deserialize "
+                f"({self.why[topic]}); left out"
+            )
+
+
+def _read_back(target: Path, kept: Counter[str]) -> None:
+    """Read the new bag back, every message deserialized; raise if it differs from ``kept``."""
+    counts: Counter[str] = Counter()
+    with open_bag(target) as bag:
+        for topic, _stamp, _msg in bag.messages(list(kept)):
+            counts[topic] += 1
+    if counts != kept:
+        raise BagReadError(
+            f"{target}: the salvaged bag does not read back as written "
+            f"(read {dict(counts)}, wrote {dict(kept)}); removed"
+        )
 
 
 class _Types:
@@ -391,6 +502,39 @@ class _NothingSalvagedError(Exception):
     pass
 
 
+@dataclass
+class _Copy:
+    """What one salvage has declared and kept so far, file after file."""
+
+    writer: BagWriter
+    report: SalvageReport
+    types: _Types
+    payloads: _Payloads
+    seen: set[str] = field(default_factory=set)
+    written: set[str] = field(default_factory=set)  # topics declared in the new bag
+    stored_custom: dict[str, str] = field(default_factory=dict)
+
+    def file(self, path: Path) -> None:
+        items = _mcap_items if path.suffix == ".mcap" else _sqlite_items
+        for kind, value in items(path, self.report.damage):
+            if kind == "message":
+                self._message(*value)
+            elif kind == "topic" and value.name not in self.seen:
+                self.seen.add(value.name)
+                if self.types.known(value) and _declare(
+                    self.writer, value, self.types, self.report.damage
+                ):
+                    self.written.add(value.name)
+                    self.payloads.msgtypes[value.name] = normalise_type(value.msgtype)
+            elif kind == "custom":
+                self.stored_custom.update(value)
+
+    def _message(self, topic: str, stamp_ns: int, raw: bytes) -> None:
+        if topic in self.written and (data := self.payloads.readable(topic, raw)) is not None:
+            self.writer.write(topic, stamp_ns, data)
+            self.report.kept[topic] += 1
+
+
 def salvage(
     bag: str | Path,
     out: str | Path | None = None,
@@ -403,33 +547,29 @@ def salvage(
         raise BagReadError(f"{source}: no such bag")
     files = storage_files(source)
     if not files:
-        raise BagReadError(f"{source}: no .mcap or .db3 files to salvage")
+        raise BagReadError(f"{source}: no .mcap or .db3 files (or their .zstd) to salvage")
     target = Path(out) if out is not None else source.with_name(source.name + ".salvaged")
     report = SalvageReport(source, None)
-    custom, report.recorded = _metadata(source if source.is_dir() else source.parent, report.damage)
+    folder = source if source.is_dir() else source.parent
+    custom, report.recorded = _metadata(folder, report.damage)
     types = _Types(report.damage)
-    seen: set[str] = set()
-    written: set[str] = set()  # topics declared in the new bag
-    stored_custom: dict[str, str] = {}
+    payloads = _Payloads(types, _message_compression(folder))
     try:
-        with BagWriter(target) as writer:
+        with tempfile.TemporaryDirectory() as tmp, BagWriter(target) as writer:
+            copy = _Copy(writer, report, types, payloads)
             for path in files:
                 progress(f"reading {path.name}")
-                items = _mcap_items if path.suffix == ".mcap" else _sqlite_items
-                for kind, value in items(path, report.damage):
-                    if kind == "message":
-                        if value[0] in written:
-                            writer.write(*value)
-                            report.kept[value[0]] += 1
-                    elif kind == "topic" and value.name not in seen:
-                        seen.add(value.name)
-                        if types.known(value) and _declare(writer, value, types, report.damage):
-                            written.add(value.name)
-                    elif kind == "custom":
-                        stored_custom.update(value)
+                if path.suffix != COMPRESSED_SUFFIX:
+                    copy.file(path)
+                elif (plain := _decompressed(path, Path(tmp), report.damage)) is None:
+                    report.damage.append(f"{path.name}: nothing decompresses; left out")
+                else:
+                    copy.file(plain)
+                    plain.unlink()
+            payloads.report(report.damage)
             if not report.kept:
                 raise _NothingSalvagedError
-            data = dict(stored_custom if custom is None else custom)
+            data = dict(copy.stored_custom if custom is None else custom)
             lost = "; ".join(report.damage) or "no damage found"
             data[SALVAGED_KEY] = f"from {source}: {lost}"
             for key, value in data.items():
@@ -437,5 +577,10 @@ def salvage(
     except _NothingSalvagedError:
         report.damage.append("no message could be read: nothing written")
         return report
+    try:
+        _read_back(target, report.kept)
+    except Exception:
+        shutil.rmtree(target, ignore_errors=True)
+        raise
     report.out = target
     return report

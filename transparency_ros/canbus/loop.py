@@ -12,8 +12,11 @@ socketcan kernel stamp), not when this thread got to read it: a device answers w
 millisecond is 6 mrad of apparent position error. Interfaces without epoch timestamps fall back
 to the time the request was sent (late replies from them are dropped: their time is unknown).
 
-A tripped reply watchdog sends the protocol's disable frames at once. Deadlines are
-absolute (no drift); a cycle that overruns by a whole period resynchronises and is counted.
+A tripped reply watchdog (``core.driver``: silent for a time, over enough requests) sends the
+protocol's disable frames at once. A motor that is not driven (faulted, or disabled while the loop
+runs) is still polled with the protocol's query frames, which do not drive it, and its replies
+are still handed on: what the bus reports stays visible. Deadlines are absolute (no drift); a
+cycle that overruns by a whole period resynchronises and is counted.
 
 The loop also measures itself: achieved rate and cycle jitter (|actual period - nominal|).
 """
@@ -33,6 +36,7 @@ from transparency_ros.canbus.client import ActuatorClient
 from transparency_ros.canbus.clock import WALL
 from transparency_ros.canbus.protocol import Feedback
 from transparency_ros.core.driver import DriverCore, DriverMode
+from transparency_ros.core.histogram import DurationHistogram
 
 
 @dataclass(frozen=True)
@@ -72,6 +76,13 @@ class PeriodicLoop:
         self._cpu: deque[int] = deque(maxlen=stats_window)
         self.cycles = 0
         self.overruns = 0
+        self.lateness = DurationHistogram()  # cycle start - its deadline (the host's stalls)
+
+    def min_unanswered(self, core: DriverCore) -> int:
+        """Requests a silent motor must have left unanswered before its watchdog trips: half of
+        what this loop sends in ``reply_silence_s`` (at least 3), so that a stall of this host,
+        during which nothing was asked, is not taken for a silent motor."""
+        return max(3, int(0.5 * core.settings.reply_silence_s / self.period_s))
 
     def cycle(self) -> None:
         raise NotImplementedError
@@ -102,6 +113,7 @@ class PeriodicLoop:
         try:
             while not self._stop.is_set():
                 start = self.clock()
+                self.lateness.add(max(start - deadline, 0.0))
                 self._starts.append(start)
                 self.cycles += 1
                 cpu = time.thread_time_ns()
@@ -225,7 +237,7 @@ class ControlLoop(PeriodicLoop):
         if rx_wall_s is not None and abs(rx_wall_s - ref_wall_s) < 1.0:
             samples.append((feedback, ref_s + (rx_wall_s - ref_wall_s)))
             self._last_rx_wall_s = rx_wall_s
-            self.core.on_feedback(feedback.position_rad)
+            self.core.on_feedback(feedback.position_rad, ref_s)
 
     def cycle(self) -> None:
         """One cycle; the loop thread runs it every period (tests may call it directly)."""
@@ -237,26 +249,31 @@ class ControlLoop(PeriodicLoop):
             for queued, queued_rx in self.client.drain():
                 self._late(queued, queued_rx, sent_s, sent_wall_s, samples)
             command = self.core.command(sent_s)
-            if command is not None:
-                self.client.send(
-                    self.client.protocol.command_frames(command, self.client.last_feedback)
-                )
-                deadline = sent_s + self.reply_timeout_s
-                while True:
-                    feedback = self.client.receive(deadline - self.clock())
-                    rx = self.client.last_rx_wall_s
-                    if feedback is None or rx is None or rx >= sent_wall_s:
-                        break
-                    self._late(feedback, rx, sent_s, sent_wall_s, samples)  # an older request's
-                if feedback is not None:
-                    latency = 0.0 if rx is None else min(rx - sent_wall_s, self.period_s)
-                    samples.append((feedback, sent_s + latency))
-                    if rx is not None:
-                        self._last_rx_wall_s = max(self._last_rx_wall_s, rx)
-                    self.core.on_feedback(feedback.position_rad)
-                elif self.core.on_missed_reply():
-                    self.client.send(self.client.protocol.disable_frames())
-                    reason = self.core.status.fault_reason
+            protocol = self.client.protocol
+            self.client.send(
+                protocol.query_frames()
+                if command is None
+                else protocol.command_frames(command, self.client.last_feedback)
+            )
+            deadline = sent_s + self.reply_timeout_s
+            while True:
+                feedback = self.client.receive(deadline - self.clock())
+                rx = self.client.last_rx_wall_s
+                if feedback is None or rx is None or rx >= sent_wall_s:
+                    break
+                self._late(feedback, rx, sent_s, sent_wall_s, samples)  # an older request's
+            if feedback is not None:
+                latency = 0.0 if rx is None else min(rx - sent_wall_s, self.period_s)
+                samples.append((feedback, sent_s + latency))
+                if rx is not None:
+                    self._last_rx_wall_s = max(self._last_rx_wall_s, rx)
+                self.core.on_feedback(feedback.position_rad, sent_s)
+            elif command is not None and self.core.on_missed_reply(  # (a motor not driven
+                sent_s,
+                self.min_unanswered(self.core),  # has no watchdog: nothing to disable)
+            ):
+                self.client.send(self.client.protocol.disable_frames())
+                reason = self.core.status.fault_reason
         for sample, at_s in samples:
             if at_s <= self._last_sample_s:  # never publish time going backwards
                 self.client.counters.late += 1

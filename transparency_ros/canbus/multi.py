@@ -172,7 +172,7 @@ class MultiControlLoop(PeriodicLoop):
     ) -> None:
         motor = self.motors[index]
         motor.last_feedback = feedback
-        motor.core.on_feedback(feedback.position_rad)
+        motor.core.on_feedback(feedback.position_rad, self.clock())
         if rx is not None and rx < since_wall_s:
             motor.late += 1
         elif index in got.replies:
@@ -185,7 +185,7 @@ class MultiControlLoop(PeriodicLoop):
             for feedback, rx in client.drain():
                 motor = self.motors[router.last_index]
                 motor.last_feedback = feedback
-                motor.core.on_feedback(feedback.position_rad)
+                motor.core.on_feedback(feedback.position_rad, self.clock())
                 if rx is None or rx < since_wall_s:
                     motor.late += 1
 
@@ -249,15 +249,19 @@ class MultiControlLoop(PeriodicLoop):
             sent_s = self.clock()
             sent_wall_s = WALL(sent_s)
             self._drain(sent_wall_s)
-            wanted: set[int] = set()
+            driven: set[int] = set()
             for i, motor in enumerate(self.motors):
                 command = motor.core.command(sent_s)
-                if command is not None:
+                if command is None:  # not driven (faulted, disabled): polled, still published
+                    self._send(i, motor.protocol.query_frames())
+                else:
                     self._send(i, motor.protocol.command_frames(command, motor.last_feedback))
-                    wanted.add(i)
+                    driven.add(i)
+            wanted = set(range(len(self.motors)))
             got = self._collect(wanted, sent_s + self.reply_timeout_s, sent_wall_s)
-            tripped = [i for i in sorted(wanted - got.replies.keys())
-                       if self.motors[i].core.on_missed_reply()]  # fmt: skip
+            tripped = [i for i in sorted(driven - got.replies.keys())
+                       if self.motors[i].core.on_missed_reply(
+                           sent_s, self.min_unanswered(self.motors[i].core))]  # fmt: skip
             for i in tripped:
                 motor = self.motors[i]
                 self._send(i, motor.protocol.disable_frames())

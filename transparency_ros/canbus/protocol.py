@@ -70,6 +70,11 @@ class ActuatorProtocol(ABC):
         """Make the current position read zero."""
 
     @abstractmethod
+    def query_frames(self) -> list[Frame]:
+        """Ask for the state without driving the motor (a disabled or faulted motor is polled
+        with these, so its state is still published)."""
+
+    @abstractmethod
     def command_frames(self, cmd: ImpedanceCommand, last: Feedback | None) -> list[Frame]: ...
 
     @property
@@ -123,6 +128,9 @@ class MitProtocol(ActuatorProtocol):
 
     def zero_frames(self, last: Feedback | None) -> list[Frame]:
         return [self._frame(mit.SET_ZERO)]
+
+    def query_frames(self) -> list[Frame]:
+        return [self._frame(mit.EXIT_MOTOR_MODE)]  # answered with the state; stays released
 
     def _command(self, cmd: ImpedanceCommand) -> Frame:
         g = self.gear_ratio
@@ -200,6 +208,9 @@ class ODriveProtocol(ActuatorProtocol):
     def zero_frames(self, last: Feedback | None) -> list[Frame]:
         if last is not None:
             self.zero_offset_rad += last.position_rad
+        return self._requests()
+
+    def query_frames(self) -> list[Frame]:
         return self._requests()
 
     def _requests(self) -> list[Frame]:
@@ -289,6 +300,9 @@ class MoteusProtocol(ActuatorProtocol):
     def zero_frames(self, last: Feedback | None) -> list[Frame]:
         if last is not None:
             self.zero_offset_rad += last.position_rad
+        return [self._frame(moteus_fd.encode_query(moteus_fd.DEFAULT_QUERY))]
+
+    def query_frames(self) -> list[Frame]:
         return [self._frame(moteus_fd.encode_query(moteus_fd.DEFAULT_QUERY))]
 
     def kp_scale(self, kp_nm_per_rad: float) -> float:

@@ -8,8 +8,13 @@
 * **command watchdog**: when targets stop arriving for ``command_timeout_s`` the driver holds the
   position it had at that moment (``timeout_action = hold``) or only damps (``damp``);
   before the first target it holds the position it was activated at;
-* **reply watchdog**: ``max_missed_replies`` cycles in a row without feedback put the driver in
-  FAULT; the caller then sends the protocol's disable frames (zero torque, motor off).
+* **reply watchdog**: a motor is silent when no reply has come for ``reply_silence_s`` since
+  the first request it left unanswered, *and* it left unanswered at least the requests the loop
+  passes as ``min_unanswered`` (half of what the loop should have sent in that time). Judged by
+  time, a faster loop does not make it stricter; counting requests too, a stall of the host
+  (the scheduler, the collector, the interpreter) during which nothing was asked is not
+  taken for a silent motor. Then the driver is in FAULT; the caller sends the protocol's
+  disable frames (zero torque, motor off).
 
 Time is passed in (seconds, any monotonic origin); nothing here reads a clock.
 """
@@ -50,7 +55,7 @@ class DriverSettings:
     command_timeout_s: float = 0.5
     timeout_action: TimeoutAction = TimeoutAction.HOLD
     timeout_damping_nms_per_rad: float = 0.05
-    max_missed_replies: int = 10
+    reply_silence_s: float = 0.1
     position_min_rad: float = -12.5
     position_max_rad: float = 12.5
     velocity_limit_rad_s: float = 20.0
@@ -66,8 +71,8 @@ class DriverSettings:
             problems.append(f"command_timeout_s must be > 0, got {self.command_timeout_s}")
         if not self.timeout_damping_nms_per_rad >= 0:
             problems.append("timeout_damping must be >= 0")
-        if self.max_missed_replies < 1:
-            problems.append(f"max_missed_replies must be >= 1, got {self.max_missed_replies}")
+        if not (math.isfinite(self.reply_silence_s) and self.reply_silence_s > 0):
+            problems.append(f"reply_silence_s must be > 0, got {self.reply_silence_s}")
         if not self.position_min_rad < self.position_max_rad:
             problems.append(
                 f"position limits must satisfy min < max, got "
@@ -161,6 +166,8 @@ class DriverStatus:
     commands_rejected: int = 0
     commands_clamped: int = 0
     missed_replies_in_row: int = 0
+    silent_since_s: float | None = None  # when the first request still unanswered was sent
+    longest_silence_s: float = 0.0  # the longest silence that ended with a reply
     missed_replies_total: int = 0
     command_timed_out: bool = False
     last_rejection: str = ""
@@ -194,6 +201,7 @@ class DriverCore:
         self.status.mode = DriverMode.ACTIVE
         self.status.fault_reason = ""
         self.status.missed_replies_in_row = 0
+        self.status.silent_since_s = None
         self.status.command_timed_out = False
         self._target = None
         self._timeout_hold_rad = None
@@ -239,19 +247,33 @@ class DriverCore:
         self.status.commands_rejected += 1
         self.status.last_rejection = reason
 
-    def on_feedback(self, position_rad: float) -> None:
-        self.status.missed_replies_in_row = 0
+    def on_feedback(self, position_rad: float, now_s: float | None = None) -> None:
+        """A reply (``now_s``: when it was taken, to measure the silence it ends)."""
+        st = self.status
+        if st.silent_since_s is not None and now_s is not None:
+            st.longest_silence_s = max(st.longest_silence_s, now_s - st.silent_since_s)
+        st.missed_replies_in_row = 0
+        st.silent_since_s = None
         self.last_position_rad = position_rad
 
-    def on_missed_reply(self) -> bool:
-        """Count a cycle without feedback; True when this trips the fault."""
-        self.status.missed_replies_total += 1
-        self.status.missed_replies_in_row += 1
+    def on_missed_reply(self, sent_s: float, min_unanswered: int = 3) -> bool:
+        """A request sent at ``sent_s`` got no reply in its cycle; True when this trips the
+        fault: silent for ``reply_silence_s`` over at least ``min_unanswered`` requests."""
+        st = self.status
+        st.missed_replies_total += 1
+        st.missed_replies_in_row += 1
+        if st.silent_since_s is None:
+            st.silent_since_s = sent_s
+        silent_s = sent_s - st.silent_since_s
         if (
-            self.status.mode is DriverMode.ACTIVE
-            and self.status.missed_replies_in_row >= self.settings.max_missed_replies
+            st.mode is DriverMode.ACTIVE
+            and silent_s >= self.settings.reply_silence_s
+            and st.missed_replies_in_row >= max(min_unanswered, 1)
         ):
-            self.fault(f"{self.status.missed_replies_in_row} replies missed in a row")
+            self.fault(
+                f"no reply for {silent_s * 1e3:.0f} ms ({st.missed_replies_in_row} requests "
+                "unanswered)"
+            )
             return True
         return False
 

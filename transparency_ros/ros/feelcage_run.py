@@ -96,9 +96,6 @@ def run_cell(
         "k_s": setup.k_s_nm_per_rad, "k_d": 0.0, "publish_rate_hz": setup.sample_rate_hz,
         "position_min_rad": -1000.0, "position_max_rad": 1000.0,
         "velocity_limit_rad_s": 1000.0, "torque_limit_nm": peak, "command_timeout_s": 1.0,
-        # the simulated device shares this 2-core machine with three node processes: a reply
-        # that misses its cycle is dropped (its stamp would be wrong), not a reason to stop
-        "max_missed_replies": 100,
     }  # fmt: skip
     procs: dict[str, subprocess.Popen[str]] = {}
     logs: dict[str, str] = {}

@@ -136,12 +136,18 @@ def unknown_overrides(node: Node) -> list[str]:
     )
 
 
-def check_unknown(node: Node, *, refuse: bool) -> None:
-    """Refuse (nodes that command motors) or warn about parameters the node does not know."""
+def check_unknown(node: Node, *, refuse: bool, renamed: dict[str, str] | None = None) -> None:
+    """Refuse (nodes that command motors) or warn about parameters the node does not know;
+    ``renamed``: old name -> what replaced it, said with it."""
     unknown = unknown_overrides(node)
     if not unknown:
         return
+    hints = [
+        f"{name} is now {(renamed or {})[name]}" for name in unknown if name in (renamed or {})
+    ]
     text = f"unknown parameter(s) {unknown} (see --help for this node's parameters)"
+    if hints:
+        text += ": " + "; ".join(hints)
     if refuse:
         raise ParameterError(text)
     node.get_logger().warning(text + ": ignored")

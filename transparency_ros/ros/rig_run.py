@@ -122,7 +122,7 @@ def run_rig(
         procs["actuator_driver"] = start_node("actuator_driver", {
             "sim_actuator": actuator, "sim_environment": "drop_rig", "sim_rig_seed": seed,
             "k_s": k_s, "k_d": drop.k_d_nms_per_rad, "position_min_rad": -100.0,
-            "position_max_rad": 100.0, "command_timeout_s": 60.0, "max_missed_replies": 100,
+            "position_max_rad": 100.0, "command_timeout_s": 60.0,
             "torque_limit_nm": get_actuator(actuator).peak_torque_nm,
         }, domain_id=domain)  # fmt: skip
         procs["contact_estimator"] = start_node("contact_estimator", {

@@ -68,7 +68,7 @@ def build(protocol: str, ids: list[int], buses: int = 1, policy: str = "all") ->
                 PhysicsParams.from_actuator(get_actuator("U10DD")), max_step_s=ROBOT_SIM_STEP_S
             )
             devices.append((physics, device))
-            core = DriverCore(DriverSettings(max_missed_replies=4))
+            core = DriverCore(DriverSettings(reply_silence_s=0.008))
             motors.append(Motor(f"j{motor_id}", host, core, bus=b))
         sims.append(SimulatedBus(devices, settings))
         opened.append(settings.open())
@@ -155,10 +155,16 @@ def test_a_silent_motor_trips_its_own_watchdog(robot: Robot) -> None:
         assert wait_for(lambda: not any(sim.enabled()))
     else:
         assert others == [DriverMode.ACTIVE] * 2
-        time.sleep(0.1)
-        last = robot.samples[-1]
-        assert last.indices == (0, 2), "the others keep being published"
         assert sim.enabled() == [True, False, True]
+    # driven or disabled, the motors that answer keep being published (disabled ones polled)
+    count = len(robot.samples)
+    time.sleep(0.1)
+    assert len(robot.samples) > count + 10
+    assert robot.samples[-1].indices == (0, 2), "the others keep being published"
+    # and once the silent one answers again, it is published again, still disabled
+    sim.silence(device, False)
+    assert wait_for(lambda: robot.samples[-1].indices == (0, 1, 2))
+    assert not silent.is_enabled() and loop.motors[1].core.mode is DriverMode.FAULT
 
 
 @pytest.mark.parametrize("robot", [("mit", [1, 2], 1, "all")], indirect=True)

@@ -72,14 +72,15 @@ def _level(core: DriverCore, configured: bool, late: Callable[[], str | None]) -
         return DiagnosticStatus.ERROR, f"FAULT: {s.fault_reason}"
     if not configured:
         return DiagnosticStatus.WARN, "not configured"
-    if s.command_timed_out:
-        timeout = core.settings
-        return (
-            DiagnosticStatus.WARN,
-            f"no command for {timeout.command_timeout_s} s: {timeout.timeout_action.value}",
-        )
     if (message := late()) is not None:
         return DiagnosticStatus.WARN, message
+    if s.command_timed_out:  # holding (or damping) after the last command is normal operation
+        timeout = core.settings
+        return (
+            DiagnosticStatus.OK,
+            f"{s.mode.value}: {timeout.timeout_action.value} (no command for "
+            f"{timeout.command_timeout_s:g} s)",
+        )
     return DiagnosticStatus.OK, s.mode.value
 
 
@@ -90,6 +91,8 @@ def _core_report(core: DriverCore, interface: str, channel: str) -> dict[str, An
         "commands_accepted": s.commands_accepted, "commands_rejected": s.commands_rejected,
         "commands_clamped": s.commands_clamped, "missed_replies_total": s.missed_replies_total,
         "missed_replies_in_row": s.missed_replies_in_row, "last_rejection": s.last_rejection,
+        "longest_silence_ms": f"{s.longest_silence_s * 1e3:.1f}",
+        "fault_reason": s.fault_reason,
     }  # fmt: skip
 
 
@@ -104,6 +107,9 @@ def _loop_report(loop: PeriodicLoop) -> dict[str, Any]:
         "jitter_max_us": f"{st.jitter_max_s * 1e6:.0f}",
         "cycle_cpu_p50_us": f"{st.cpu_p50_s * 1e6:.0f}",
         "cycle_cpu_p99_us": f"{st.cpu_p99_s * 1e6:.0f}",
+        # how late cycles started (this computer's stalls), since start
+        "cycle_late_p99_us": f"{loop.lateness.percentile(99) * 1e6:.0f}",
+        "cycle_late_max_ms": f"{loop.lateness.max_s * 1e3:.1f}",
     }
 
 

@@ -19,7 +19,7 @@ import time
 from dataclasses import replace
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -47,6 +47,7 @@ from transparency_ros.core.driver import (
     parse_joint_command,
 )
 from transparency_ros.core.errors import TransparencyError
+from transparency_ros.core.gc_pauses import GcPauses
 from transparency_ros.ros import in_process
 from transparency_ros.ros.actuator_driver.diagnostics import (
     driver_status,
@@ -64,6 +65,7 @@ from transparency_ros.ros.actuator_driver.hardware import (
 from transparency_ros.ros.actuator_driver.parameters import (
     NODE_NAME,
     PARAMETERS,
+    RENAMED,
     RUNTIME,
     exit_logger,
     settings_value,
@@ -105,7 +107,7 @@ class ActuatorDriverNode(LifecycleNode):
             self.values.update(declare(self, per_joint))
             specs += per_joint
         # a misspelt name would leave a default in force on a motor: refused at start
-        check_unknown(self, refuse=True)
+        check_unknown(self, refuse=True, renamed=RENAMED)
         accept_integers_for_doubles(self, specs)
         if self.values["gil_switch_interval_s"] > 0:
             sys.setswitchinterval(self.values["gil_switch_interval_s"])
@@ -132,6 +134,7 @@ class ActuatorDriverNode(LifecycleNode):
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._late_seen = (0, 0)  # (late replies, replies) at the last diagnostics
+        self.gc_pauses = GcPauses().start()  # the collector's stalls, in /diagnostics
         self.create_timer(self.values["diagnostics_period_s"], self.publish_diagnostics)
         self.create_service(Trigger, "~/set_zero", self._on_set_zero)
         self.create_service(SetBool, "~/enable", self._on_enable)
@@ -427,6 +430,10 @@ class ActuatorDriverNode(LifecycleNode):
         with self._safe_lock:
             self._close()
 
+    def destroy_node(self) -> None:
+        self.gc_pauses.stop()
+        super().destroy_node()
+
     # ----------------------------------------------------------------- data path
 
     def _ros_seconds_at(self, monotonic_s: float) -> float:
@@ -600,6 +607,12 @@ class ActuatorDriverNode(LifecycleNode):
             statuses = [
                 driver_status(self.values, self.core, self.client, loop, self._late_in_period)
             ]
+        gc_report = [
+            KeyValue(key="gc_collections", value=str(self.gc_pauses.durations.count)),
+            KeyValue(key="gc_full_collections", value=str(self.gc_pauses.full)),
+            KeyValue(key="gc_pause_max_ms", value=f"{self.gc_pauses.durations.max_s * 1e3:.2f}"),
+        ]
+        statuses[-1].values.extend(gc_report)  # the loop's status (the only one of one motor)
         array = DiagnosticArray(status=statuses)
         array.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(array)

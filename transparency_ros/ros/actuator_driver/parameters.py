@@ -230,7 +230,15 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         choices=("hold", "damp"),
     ),
     P("timeout_damping", 0.05, "k_d used by timeout_action=damp [N m s/rad]", low=0.0, high=100.0),
-    P("max_missed_replies", 10, "replies missed in a row before FAULT", low=1, high=10_000),
+    P(
+        "reply_silence_s",
+        0.1,
+        "reply watchdog: FAULT (motor disabled, still polled and published) when a driven motor "
+        "has not answered for this long, over at least half the requests sent in that time (a "
+        "stall of this computer is not a silent motor)",
+        low=0.005,
+        high=10.0,
+    ),
     P("position_min_rad", -12.5, "command position clamp min [rad]"),
     P("position_max_rad", 12.5, "command position clamp max [rad]"),
     P("velocity_limit_rad_s", 20.0, "command velocity clamp [rad/s]", low=1e-3, high=1e4),
@@ -245,11 +253,17 @@ RUNTIME = {
     "command_timeout_s": "command_timeout_s",
     "timeout_action": "timeout_action",
     "timeout_damping": "timeout_damping_nms_per_rad",
-    "max_missed_replies": "max_missed_replies",
+    "reply_silence_s": "reply_silence_s",
     "position_min_rad": "position_min_rad",
     "position_max_rad": "position_max_rad",
     "velocity_limit_rad_s": "velocity_limit_rad_s",
     "torque_limit_nm": "torque_limit_nm",
+}
+
+
+# parameters of earlier releases: refused at start with what replaced them
+RENAMED = {
+    "max_missed_replies": "reply_silence_s (the reply watchdog counts time now, not cycles)",
 }
 
 
