@@ -12,6 +12,7 @@ from transparency_ros.canbus.client import ActuatorClient
 from transparency_ros.canbus.loop import ControlLoop, PeriodicLoop
 from transparency_ros.canbus.multi import MultiControlLoop
 from transparency_ros.core.driver import DriverCore, DriverMode
+from transparency_ros.core.gc_pauses import GcPauses
 from transparency_ros.ros.actuator_driver.hardware import MotorSpec
 from transparency_ros.ros.actuator_driver.parameters import NODE_NAME
 
@@ -149,3 +150,12 @@ def robot_statuses(
         summary[f"{spec_channel}.other_frames"] = c.other
     loop_status.values = [KeyValue(key=k, value=str(v)) for k, v in summary.items()]
     return [*statuses, loop_status]
+
+
+def gc_values(pauses: GcPauses) -> list[KeyValue]:
+    """The collector's pauses since start-up (``core.gc_pauses``), for the loop's status."""
+    return [
+        KeyValue(key="gc_collections", value=str(pauses.durations.count)),
+        KeyValue(key="gc_full_collections", value=str(pauses.full)),
+        KeyValue(key="gc_pause_max_ms", value=f"{pauses.durations.max_s * 1e3:.2f}"),
+    ]

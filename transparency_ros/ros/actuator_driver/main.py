@@ -3,7 +3,6 @@ for a configuration or bus error; every exit path leaves the motors disabled."""
 
 from __future__ import annotations
 
-import gc
 import sys
 
 import rclpy
@@ -21,7 +20,7 @@ from transparency_ros.ros.actuator_driver.parameters import (
     PARAMETERS,
     exit_logger,
 )
-from transparency_ros.ros.params import parse_node_cli
+from transparency_ros.ros.params import freeze_startup, parse_node_cli
 
 
 def main(args: list[str] | None = None) -> int:
@@ -30,10 +29,7 @@ def main(args: list[str] | None = None) -> int:
     node: ActuatorDriverNode | None = None
     try:
         node = ActuatorDriverNode()
-        # what start-up made stays out of the collector: a full collection then takes ~1 ms
-        # instead of 10-25 ms, during which the hardware loop cannot run (GIL)
-        gc.collect()
-        gc.freeze()
+        freeze_startup()
         node.gc_pauses.durations.reset()  # from here on: the collections while running
         executor = MultiThreadedExecutor(num_threads=2)
         executor.add_node(node)

@@ -19,7 +19,7 @@ import time
 from dataclasses import replace
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -51,6 +51,7 @@ from transparency_ros.core.gc_pauses import GcPauses
 from transparency_ros.ros import in_process
 from transparency_ros.ros.actuator_driver.diagnostics import (
     driver_status,
+    gc_values,
     late_message,
     robot_statuses,
 )
@@ -65,18 +66,13 @@ from transparency_ros.ros.actuator_driver.hardware import (
 from transparency_ros.ros.actuator_driver.parameters import (
     NODE_NAME,
     PARAMETERS,
-    RENAMED,
     RUNTIME,
+    declare_all,
     exit_logger,
     settings_value,
 )
 from transparency_ros.ros.conversions import stamp_to_s
-from transparency_ros.ros.params import (
-    accept_integers_for_doubles,
-    check_unknown,
-    choice_error,
-    declare,
-)
+from transparency_ros.ros.params import choice_error
 from transparency_ros.ros.sim_ball import SimBallInterface
 from transparency_ros.ros.sim_rig import SimRigInterface
 
@@ -89,26 +85,11 @@ class ActuatorDriverNode(LifecycleNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.values = declare(self, PARAMETERS)
+        self.joint_names: list[str] = []
+        self.values = declare_all(self, self._joints_of)
         self.core = DriverCore(DriverSettings(**{
             field: settings_value(name, self.values[name]) for name, field in RUNTIME.items()
         }))  # fmt: skip
-        # several motors: every runtime parameter per joint, "<joint>.k_s" (default: the global)
-        self.joint_names: list[str] = []
-        with contextlib.suppress(ValueError):  # a bad list is reported by configure
-            self.joint_names = [spec.joint for spec in motor_specs(self.values)]
-        specs = list(PARAMETERS)
-        for joint in self.joint_names:
-            per_joint = [
-                replace(spec, name=f"{joint}.{spec.name}", default=self.values[spec.name],
-                        description=f"{joint}: {spec.description}")
-                for spec in PARAMETERS if spec.name in RUNTIME
-            ]  # fmt: skip
-            self.values.update(declare(self, per_joint))
-            specs += per_joint
-        # a misspelt name would leave a default in force on a motor: refused at start
-        check_unknown(self, refuse=True, renamed=RENAMED)
-        accept_integers_for_doubles(self, specs)
         if self.values["gil_switch_interval_s"] > 0:
             sys.setswitchinterval(self.values["gil_switch_interval_s"])
             self.get_logger().info(
@@ -153,6 +134,11 @@ class ActuatorDriverNode(LifecycleNode):
             self.trigger_configure()
             if self.configured:
                 self.trigger_activate()
+
+    def _joints_of(self, values: dict[str, Any]) -> list[str]:
+        with contextlib.suppress(ValueError):  # a bad list is reported by configure
+            self.joint_names = [spec.joint for spec in motor_specs(values)]
+        return self.joint_names
 
     @property
     def configured(self) -> bool:
@@ -607,12 +593,7 @@ class ActuatorDriverNode(LifecycleNode):
             statuses = [
                 driver_status(self.values, self.core, self.client, loop, self._late_in_period)
             ]
-        gc_report = [
-            KeyValue(key="gc_collections", value=str(self.gc_pauses.durations.count)),
-            KeyValue(key="gc_full_collections", value=str(self.gc_pauses.full)),
-            KeyValue(key="gc_pause_max_ms", value=f"{self.gc_pauses.durations.max_s * 1e3:.2f}"),
-        ]
-        statuses[-1].values.extend(gc_report)  # the loop's status (the only one of one motor)
+        statuses[-1].values.extend(gc_values(self.gc_pauses))  # the loop's (or the motor's)
         array = DiagnosticArray(status=statuses)
         array.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(array)

@@ -5,11 +5,18 @@ generated from and tested against them."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from transparency_ros.canbus.protocol import PROTOCOLS
 from transparency_ros.core.driver import TimeoutAction
-from transparency_ros.ros.params import ParamSpec
+from transparency_ros.ros.params import (
+    ParamSpec,
+    accept_integers_for_doubles,
+    check_unknown,
+    declare,
+)
 
 NODE_NAME = "actuator_driver"
 
@@ -278,6 +285,26 @@ DESCRIPTION = (
     "autostart it configures and activates itself. Services: ~/set_zero (std_srvs/Trigger), "
     "~/enable (std_srvs/SetBool). Default: a simulated U10DD on a virtual bus."
 )
+
+
+def declare_all(node: Any, joints: Callable[[dict[str, Any]], list[str]]) -> dict[str, Any]:
+    """Declare the table on ``node``, then every runtime parameter per joint ("<joint>.k_s",
+    default: the global one) for the joints ``joints(values)`` names; refuse a name the node
+    does not know (a misspelt one would leave a default in force on a motor); take integers for
+    doubles at runtime. Returns the values."""
+    values = declare(node, PARAMETERS)
+    specs = list(PARAMETERS)
+    for joint in joints(values):
+        per_joint = [
+            replace(spec, name=f"{joint}.{spec.name}", default=values[spec.name],
+                    description=f"{joint}: {spec.description}")
+            for spec in PARAMETERS if spec.name in RUNTIME
+        ]  # fmt: skip
+        values.update(declare(node, per_joint))
+        specs += per_joint
+    check_unknown(node, refuse=True, renamed=RENAMED)
+    accept_integers_for_doubles(node, specs)
+    return values
 
 
 def exit_logger() -> Any:
