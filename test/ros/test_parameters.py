@@ -18,7 +18,7 @@ from rclpy.context import Context  # noqa: E402
 
 from test.ros.conftest import Spinner, wait_for  # noqa: E402
 from test.ros.test_actuator_driver import make_probe  # noqa: E402
-from transparency_ros.ros import contact_estimator, feel_cage_behavior  # noqa: E402
+from transparency_ros.ros import estimator_params, feel_cage_behavior  # noqa: E402
 from transparency_ros.ros.actuator_driver import PARAMETERS as DRIVER  # noqa: E402
 from transparency_ros.ros.params import ParamSpec  # noqa: E402
 
@@ -48,7 +48,7 @@ def run_all(commands: list[list[str]], timeout_s: float = 60.0) -> list[tuple[in
 def choice_specs() -> list[tuple[str, ParamSpec]]:
     return (
         [("actuator_driver", s) for s in DRIVER if s.choices]
-        + [("contact_estimator", s) for s in contact_estimator.PARAMETERS if s.choices]
+        + [("contact_estimator", s) for s in estimator_params.PARAMETERS if s.choices]
         + [("feel_cage_behavior", s) for s in feel_cage_behavior.parameters() if s.choices]
     )
 

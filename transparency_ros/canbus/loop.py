@@ -28,15 +28,31 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from transparency_ros.canbus.client import ActuatorClient
 from transparency_ros.canbus.clock import WALL
 from transparency_ros.canbus.protocol import Feedback
-from transparency_ros.core.driver import DriverCore, DriverMode
+from transparency_ros.core.driver import DriverCore, DriverMode, ImpedanceCommand
 from transparency_ros.core.histogram import DurationHistogram
+
+# a reply, its time, and the command of the request it answers at that time (None: the motor
+# was not driven; a late reply is taken to answer the previous cycle's request)
+_Answer = tuple[Feedback, float, ImpedanceCommand | None]
+
+
+def command_at(command: ImpedanceCommand | None, sent_s: float, at_s: float
+               ) -> ImpedanceCommand | None:  # fmt: skip
+    """A command sent at ``sent_s`` as it stands at ``at_s``: its position advanced by its
+    velocity (a streamed trajectory's theta_d at the instant a reply measured the joint, as
+    the driver itself advances it between commands and a moteus does in the device)."""
+    if command is None or command.velocity_rad_s == 0.0 or command.kp_nm_per_rad == 0.0:
+        return command
+    return replace(
+        command, position_rad=command.position_rad + command.velocity_rad_s * (at_s - sent_s)
+    )
 
 
 @dataclass(frozen=True)
@@ -164,7 +180,10 @@ class ControlLoop(PeriodicLoop):
         *,
         rate_hz: float,
         reply_timeout_s: float,
-        on_sample: Callable[[Feedback, float], None] = lambda _fb, _t: None,  # (sample, time)
+        # (sample, its time, the command it answers: None when the motor was not driven)
+        on_sample: Callable[[Feedback, float, ImpedanceCommand | None], None] = (
+            lambda _fb, _t, _c: None
+        ),
         on_fault: Callable[[str], None] = lambda _reason: None,
         on_error: Callable[[BaseException], None] = lambda _err: None,
         clock: Callable[[], float] = time.monotonic,
@@ -177,6 +196,8 @@ class ControlLoop(PeriodicLoop):
         self.on_sample, self.on_fault = on_sample, on_fault
         self._last_sample_s = -math.inf
         self._last_rx_wall_s = -math.inf  # bus time of the newest reply handed on
+        # the last cycle's command and when it was sent (the late replies' request)
+        self._previous: tuple[ImpedanceCommand | None, float] = (None, 0.0)
 
     # ----------------------------------------------------------------- control
 
@@ -226,7 +247,7 @@ class ControlLoop(PeriodicLoop):
     # ----------------------------------------------------------------- the loop
 
     def _late(self, feedback: Feedback, rx_wall_s: float | None, ref_s: float, ref_wall_s: float,
-              samples: list[tuple[Feedback, float]]) -> None:  # fmt: skip
+              samples: list[_Answer]) -> None:  # fmt: skip
         """A reply that missed its cycle: hand it on at its bus time (dropped when unknown).
         One whose bus time is not after the newest handed on is a copy (a device repeating
         itself, a reply storm) or stale: counted as a duplicate and dropped."""
@@ -235,13 +256,14 @@ class ControlLoop(PeriodicLoop):
             return
         self.client.counters.late += 1
         if rx_wall_s is not None and abs(rx_wall_s - ref_wall_s) < 1.0:
-            samples.append((feedback, ref_s + (rx_wall_s - ref_wall_s)))
+            at_s = ref_s + (rx_wall_s - ref_wall_s)
+            samples.append((feedback, at_s, command_at(*self._previous, at_s)))
             self._last_rx_wall_s = rx_wall_s
             self.core.on_feedback(feedback.position_rad, ref_s)
 
     def cycle(self) -> None:
         """One cycle; the loop thread runs it every period (tests may call it directly)."""
-        samples: list[tuple[Feedback, float]] = []  # (sample, its time) in time order
+        samples: list[_Answer] = []  # (sample, its time, its command) in time order
         reason = ""
         with self.lock:
             sent_s = self.clock()
@@ -264,7 +286,9 @@ class ControlLoop(PeriodicLoop):
                 self._late(feedback, rx, sent_s, sent_wall_s, samples)  # an older request's
             if feedback is not None:
                 latency = 0.0 if rx is None else min(rx - sent_wall_s, self.period_s)
-                samples.append((feedback, sent_s + latency))
+                samples.append(
+                    (feedback, sent_s + latency, command_at(command, sent_s, sent_s + latency))
+                )
                 if rx is not None:
                     self._last_rx_wall_s = max(self._last_rx_wall_s, rx)
                 self.core.on_feedback(feedback.position_rad, sent_s)
@@ -274,12 +298,13 @@ class ControlLoop(PeriodicLoop):
             ):
                 self.client.send(self.client.protocol.disable_frames())
                 reason = self.core.status.fault_reason
-        for sample, at_s in samples:
+            self._previous = (command, sent_s)
+        for sample, at_s, applied in samples:
             if at_s <= self._last_sample_s:  # never publish time going backwards
                 self.client.counters.late += 1
                 continue
             self._last_sample_s = at_s
-            self.on_sample(sample, at_s)
+            self.on_sample(sample, at_s, applied)
         if reason:
             self.on_fault(reason)
 

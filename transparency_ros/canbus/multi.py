@@ -32,9 +32,9 @@ import can
 
 from transparency_ros.canbus.client import ActuatorClient
 from transparency_ros.canbus.clock import WALL
-from transparency_ros.canbus.loop import PeriodicLoop
+from transparency_ros.canbus.loop import PeriodicLoop, command_at
 from transparency_ros.canbus.protocol import ActuatorProtocol, Feedback, Frame
-from transparency_ros.core.driver import DriverCore, DriverMode
+from transparency_ros.core.driver import DriverCore, DriverMode, ImpedanceCommand
 
 FAULT_POLICIES = ("all", "motor")
 POLL_SLICE_S = 100e-6  # longest wait on one bus while others owe replies
@@ -62,6 +62,8 @@ class RobotSample:
     spread_s: float  # last minus first reply's bus time
     indices: tuple[int, ...]
     feedback: tuple[Feedback, ...]
+    # the command each reply answers (None: that motor was not driven)
+    commands: tuple[ImpedanceCommand | None, ...] = ()
 
 
 class _Router:
@@ -250,8 +252,8 @@ class MultiControlLoop(PeriodicLoop):
             sent_wall_s = WALL(sent_s)
             self._drain(sent_wall_s)
             driven: set[int] = set()
-            for i, motor in enumerate(self.motors):
-                command = motor.core.command(sent_s)
+            commands = [motor.core.command(sent_s) for motor in self.motors]
+            for i, (motor, command) in enumerate(zip(self.motors, commands, strict=True)):
                 if command is None:  # not driven (faulted, disabled): polled, still published
                     self._send(i, motor.protocol.query_frames())
                 else:
@@ -272,13 +274,14 @@ class MultiControlLoop(PeriodicLoop):
                     if i not in tripped and motor.core.mode is DriverMode.ACTIVE:
                         motor.core.fault(f"disabled with {names} (fault_policy all)")
                         self._send(i, motor.protocol.disable_frames())
-            sample = self._sample(got, sent_s, sent_wall_s)
+            sample = self._sample(got, sent_s, sent_wall_s, commands)
         if sample is not None:
             self.on_sample(sample)
         for reason in faults:
             self.on_fault(reason)
 
-    def _sample(self, got: _Collected, sent_s: float, sent_wall_s: float) -> RobotSample | None:
+    def _sample(self, got: _Collected, sent_s: float, sent_wall_s: float,
+                commands: list[ImpedanceCommand | None]) -> RobotSample | None:  # fmt: skip
         if not got.replies:
             return None
         indices = tuple(sorted(got.replies))
@@ -293,8 +296,9 @@ class MultiControlLoop(PeriodicLoop):
             return None
         self._last_stamp_s = stamp
         return RobotSample(
-            stamp, max(times) - min(times), indices, tuple(got.replies[i][0] for i in indices)
-        )
+            stamp, max(times) - min(times), indices, tuple(got.replies[i][0] for i in indices),
+            tuple(command_at(commands[i], sent_s, stamp) for i in indices),
+        )  # fmt: skip
 
     def emergency_stop(self, reason: str) -> None:
         for i, motor in enumerate(self.motors):

@@ -31,6 +31,7 @@ import numpy.typing as npt
 
 from transparency_ros.core import stamps
 from transparency_ros.core.errors import TransparencyError
+from transparency_ros.core.setpoint_join import Setpoints
 
 
 class EstimatorError(TransparencyError, ValueError):
@@ -342,9 +343,13 @@ class JointEstimate:
 class EstimatorPipeline:
     """Samples in, estimates and contact events out; counts what it rejects, never raises on data.
 
-    theta_d comes from the latest command for the joint, else ``default_theta_d_rad``. A stamped
-    command with a velocity is a streamed trajectory: theta_d at a sample's stamp is
-    theta_d + theta_d' (stamp - command stamp), as the driver applies it between updates.
+    theta_d comes from the driver's setpoint for the sample when given (``core.setpoint_join``;
+    a NaN theta_d there: the motor was not held, the joint gets no estimate), else from the
+    latest command for the joint, else ``default_theta_d_rad``. A stamped command with a velocity
+    is a streamed trajectory: theta_d at a sample's stamp is theta_d + theta_d' (stamp - command
+    stamp), as the driver applies it between updates. Where both a setpoint and a command are
+    known, their difference at the latest sample is kept per joint (``theta_d_gap``): a command
+    the driver clamped, stopped following after its timeout, or one of the two missed.
     """
 
     gains: EstimatorGains = field(default_factory=EstimatorGains)
@@ -353,6 +358,9 @@ class EstimatorPipeline:
     default_theta_d_rad: float = 0.0
     rejected: dict[str, int] = field(default_factory=dict)
     samples: int = 0
+    not_driven: int = 0  # joint samples without an estimate: the driver did not hold them
+    # joint -> |theta_d of its latest command - the driver's setpoint| at its latest sample [rad]
+    theta_d_gap: dict[str, float] = field(default_factory=dict)
     _commands: dict[str, tuple[float, float, int | None]] = field(default_factory=dict)
     _last_stamp: dict[str, int] = field(default_factory=dict)
 
@@ -389,11 +397,31 @@ class EstimatorPipeline:
         for i, name in enumerate(names):
             self._commands[name] = (positions[i], velocities[i] if velocities else 0.0, stamp_ns)
 
+    def _commanded(self, name: str, stamp_ns: int) -> tuple[float, float] | None:
+        """theta_d, theta_d' of the latest command for ``name`` at ``stamp_ns`` (None: none)."""
+        if name not in self._commands:
+            return None
+        theta_d, theta_d_dot, command_stamp = self._commands[name]
+        if command_stamp is not None and theta_d_dot != 0.0:
+            theta_d += theta_d_dot * (stamp_ns - command_stamp) * 1e-9
+        return theta_d, theta_d_dot
+
+    def _theta_d(self, name: str, stamp_ns: int, setpoints: Setpoints | None
+                 ) -> tuple[float, float]:  # fmt: skip
+        commanded = self._commanded(name, stamp_ns)
+        if setpoints is None or name not in setpoints:
+            return commanded or (self.default_theta_d_rad, 0.0)
+        theta_d, theta_d_dot = setpoints[name]
+        if commanded is not None and not math.isnan(theta_d):
+            self.theta_d_gap[name] = abs(commanded[0] - theta_d)
+        return theta_d, theta_d_dot
+
     def sample(
-        self, stamp_ns: int, names: list[str], positions: list[float], velocities: list[float]
-    ) -> tuple[list[JointEstimate], list[ContactEvent]]:
-        """A /joint_states message stamped ``stamp_ns`` [ns]. Raises SampleRejectedError
-        (counted) for a bad sample."""
+        self, stamp_ns: int, names: list[str], positions: list[float], velocities: list[float],
+        setpoints: Setpoints | None = None,
+    ) -> tuple[list[JointEstimate], list[ContactEvent]]:  # fmt: skip
+        """A /joint_states message stamped ``stamp_ns`` [ns], with the driver's ``setpoints``
+        for it if known. Raises SampleRejectedError (counted) for a bad sample."""
         stamp_ns = operator.index(stamp_ns)  # an int: a float stamp is a caller's bug
         self._check_arrays(names, {"positions": positions, "velocities": velocities})
         if not positions:
@@ -409,12 +437,12 @@ class EstimatorPipeline:
                     f"{name}: {stamps.text(stamp_ns)} after {stamps.text(last)}",
                 )
         estimates: list[JointEstimate] = []
+        skipped = 0
         for i, name in enumerate(names):
-            theta_d, theta_d_dot, command_stamp = self._commands.get(
-                name, (self.default_theta_d_rad, 0.0, None)
-            )
-            if command_stamp is not None and theta_d_dot != 0.0:
-                theta_d += theta_d_dot * (stamp_ns - command_stamp) * 1e-9
+            theta_d, theta_d_dot = self._theta_d(name, stamp_ns, setpoints)
+            if math.isnan(theta_d):  # the driver did not hold it: no position error to read
+                skipped += 1
+                continue
             velocity = velocities[i] if velocities else 0.0
             error = theta_d - positions[i]
             torque = self.gains.torque(theta_d, positions[i], theta_d_dot, velocity)
@@ -423,9 +451,11 @@ class EstimatorPipeline:
             estimates.append(JointEstimate(name, stamp_ns, error, torque))
         # only a sample accepted whole changes the state
         self.samples += 1
+        self.not_driven += skipped
+        for name in names:
+            self._last_stamp[name] = stamp_ns
         events: list[ContactEvent] = []
         for estimate in estimates:
-            self._last_stamp[estimate.joint] = stamp_ns
             events += self.detector.update(
                 estimate.joint, stamp_ns, estimate.error_rad, estimate.torque_nm
             )
@@ -434,3 +464,5 @@ class EstimatorPipeline:
     def reset(self) -> None:
         self.detector.reset()
         self._last_stamp.clear()
+        self.not_driven = 0
+        self.theta_d_gap.clear()

@@ -43,7 +43,6 @@ from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String, UInt8
@@ -70,11 +69,21 @@ from transparency_ros.core.estimator import (
 )
 from transparency_ros.core.histogram import DurationHistogram
 from transparency_ros.core.robot_pipeline import AwaitingModel, ObserverPipeline
+from transparency_ros.core.setpoint_join import Paired, SetpointJoin, StateSample
 from transparency_ros.ros import in_process
 from transparency_ros.ros.conversions import stamp_to_ns
+from transparency_ros.ros.estimator_params import (
+    GAIN_PARAMS,
+    LATCHED,
+    NODE_NAME,
+    PARAMETERS,
+    detector_settings,
+    load_calibration,
+    observer_pipeline,
+    observer_settings,
+)
 from transparency_ros.ros.hot_path import Delivery, HotPath
 from transparency_ros.ros.params import (
-    ParamSpec,
     accept_integers_for_doubles,
     check_unknown,
     choice_error,
@@ -82,183 +91,7 @@ from transparency_ros.ros.params import (
     run_node,
 )
 
-NODE_NAME = "contact_estimator"
-METHODS = ("position_error", "momentum_observer")
-P = ParamSpec
-PARAMETERS: tuple[ParamSpec, ...] = (
-    P(
-        "method",
-        "position_error",
-        "position_error: eq. (1), k_s (theta_d - theta_a); momentum_observer: the "
-        "generalized-momentum observer of a robot model (robot_description), driven by the "
-        "efforts of /joint_commands",
-        read_only=True,
-        choices=METHODS,
-    ),
-    P(
-        "robot_description",
-        "",
-        "momentum_observer: the URDF, as XML or a file path (as robot_state_publisher takes it); "
-        "'': the latest on the /robot_description topic (as robot_state_publisher publishes it)",
-        read_only=True,
-    ),
-    P(
-        "calibration_file",
-        "",
-        "momentum_observer: a calibration YAML from `transparency calibrate` ('': none)",
-        read_only=True,
-    ),
-    P(
-        "observer_gain_per_s",
-        20.0,
-        "momentum_observer: gain K_o [1/s] (a calibration sets its own)",
-        read_only=True,
-        low=0.1,
-        high=1000.0,
-    ),
-    P(
-        "observer_threshold_nm",
-        0.5,
-        "momentum_observer without a calibration: |residual| that starts a contact [N m]",
-        read_only=True,
-        low=1e-6,
-        high=1000.0,
-    ),
-    P("joints", [""], "joint names to accept ([''] : any)", read_only=True),
-    P("theta_d_rad", 0.0, "theta_d for joints without /joint_commands [rad]"),
-    P(
-        "k_s",
-        2.0,
-        "virtual spring k_s of the impedance controller [N m/rad]",
-        low=1e-6,
-        high=1000.0,
-    ),
-    P("k_d", 0.0, "k_d term of the full estimate [N m s/rad]", low=0.0, high=100.0),
-    P(
-        "beta",
-        0.0,
-        "back-EMF term -beta theta_a' of the full estimate [N m s/rad]",
-        low=0.0,
-        high=100.0,
-    ),
-    P(
-        "contact_onset_rad",
-        0.1,
-        "|error - bias| that starts a contact (paper: 0.1 rad drop tests)",
-        low=1e-6,
-        high=10.0,
-    ),
-    P(
-        "contact_release_rad",
-        0.05,
-        "|error - bias| that ends it (below the onset)",
-        low=0.0,
-        high=10.0,
-    ),
-    P("collision_onset_rad", 0.0, "collision level (0: off)", low=0.0, high=10.0),
-    P("collision_release_rad", 0.0, "collision release level (0: off)", low=0.0, high=10.0),
-    P(
-        "onset_dwell_s",
-        0.0,
-        "time beyond the onset level before an onset is confirmed",
-        low=0.0,
-        high=10.0,
-    ),
-    P("release_dwell_s", 0.0, "time below the release level before a release", low=0.0, high=10.0),
-    P(
-        "bias_rad",
-        0.0,
-        "known steady error subtracted before thresholding [rad]",
-        low=-10.0,
-        high=10.0,
-    ),
-    P(
-        "arm_length_m",
-        0.0,
-        "contact force = tau_hat / arm_length (0: not published)",
-        low=0.0,
-        high=10.0,
-    ),
-    P("diagnostics_period_s", 1.0, "/diagnostics period [s]", read_only=True, low=0.01, high=60.0),
-    P(
-        "queue_depth",
-        1000,
-        "/joint_states samples kept while the node catches up (0.1 s at 10 kHz)",
-        read_only=True,
-        low=1,
-        high=100000,
-    ),
-    P(
-        "hot_path_priority",
-        0,
-        "SCHED_FIFO priority (1-99) of the thread serving /joint_states; 0: normal scheduling. "
-        "Needs CAP_SYS_NICE or an rtprio limit; refused, the node warns and runs as normal",
-        read_only=True,
-        low=0,
-        high=99,
-    ),
-    P(
-        "in_process",
-        False,
-        "take /joint_states only from a source composed into this process (ros.in_process: "
-        "no DDS on the way in; for one process with the driver)",
-        read_only=True,
-    ),
-)
-DETECTOR_PARAMS = {
-    "contact_onset_rad": "contact_onset", "contact_release_rad": "contact_release",
-    "collision_onset_rad": "collision_onset", "collision_release_rad": "collision_release",
-    "onset_dwell_s": "onset_dwell_s", "release_dwell_s": "release_dwell_s", "bias_rad": "bias",
-}  # fmt: skip
-GAIN_PARAMS = {"k_s": "k_s_nm_per_rad", "k_d": "k_d_nms_per_rad", "beta": "beta_nms_per_rad"}
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def detector_settings(values: dict[str, Any]) -> DetectorSettings:
-    kwargs = {field: values[name] for name, field in DETECTOR_PARAMS.items()}
-    for key in ("collision_onset", "collision_release"):
-        if kwargs[key] == 0.0:
-            kwargs[key] = math.inf
-    return DetectorSettings(**kwargs).validated()
-
-
-def observer_settings(values: dict[str, Any]) -> DetectorSettings:
-    """The momentum observer's trigger works on |residual| / threshold: onset at 1, release at
-    0.5; the dwell times are the node's."""
-    return DetectorSettings(
-        contact_onset=1.0,
-        contact_release=0.5,
-        onset_dwell_s=values["onset_dwell_s"],
-        release_dwell_s=values["release_dwell_s"],
-    ).validated()
-
-
-def load_calibration(values: dict[str, Any]) -> Any:
-    """The ``calibration_file``'s calibration, None without one; a ConfigError naming a file
-    that is missing or not a calibration."""
-    from transparency_ros.core.robot_calibration import Calibration  # noqa: PLC0415
-
-    return Calibration.load(values["calibration_file"]) if values["calibration_file"] else None
-
-
-def observer_pipeline(values: dict[str, Any], calibration: Any = None) -> ObserverPipeline:
-    """The ``momentum_observer`` method's pipeline, with ``calibration`` (default: loaded from
-    ``calibration_file``): a clear ConfigError for a missing or bad URDF, or a calibration from
-    another robot."""
-    from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
-
-    if not values["robot_description"].strip():
-        raise ConfigError("method momentum_observer needs a URDF (robot_description is empty)")
-    model = RobotModel.from_urdf(values["robot_description"])
-    if calibration is None:
-        calibration = load_calibration(values)
-    return ObserverPipeline(
-        model,
-        values["observer_gain_per_s"],
-        SchmittDetector(observer_settings(values)),
-        calibration,
-        values["observer_threshold_nm"],
-    )
+GAP_NOTED_RAD = 1e-3  # a setpoint/command difference the diagnostics message mentions
 
 
 class ContactEstimatorNode(Node):
@@ -294,6 +127,14 @@ class ContactEstimatorNode(Node):
                 joints=joints,
                 default_theta_d_rad=self.values["theta_d_rad"],
             )
+        # theta_d from the driver's setpoints, paired with the samples (position_error only)
+        self.join: SetpointJoin | None = None
+        if isinstance(self.pipeline, EstimatorPipeline) and self.values["use_setpoints"]:
+            wait_s = self.values["setpoint_wait_s"]
+            self.join = SetpointJoin(max_wait_s=wait_s)
+            # samples waiting for setpoints while nothing arrives
+            self.create_timer(max(wait_s / 2, 0.005), self._expire_waiting)
+        self._missing_seen = 0  # setpoints missing at the last diagnostics
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
         self._estimate_pub = self.create_publisher(JointState, "/estimated_effort", 100)
@@ -321,24 +162,28 @@ class ContactEstimatorNode(Node):
         self.sample_age = DurationHistogram()
         self.onset_age = DurationHistogram()
         self._last_warn_s = -math.inf
-        self._reader = JointStateReader()
+        self._readers = {t: JointStateReader() for t in ("/joint_states", "/joint_setpoints")}
         self.hot_path = HotPath(self, priority=self.values["hot_path_priority"])
-        self._leave_in_process = None
+        self._leave_in_process: list[Any] = []
         self.delivery: Delivery | None = None  # what DDS delivered and lost (not in-process)
-        if self.values["in_process"]:
-            self._leave_in_process = in_process.subscribe(
-                self.context, "/joint_states", self.hot_path.guarded(self._on_state_bytes)
-            )
-        else:
-            sub = self.hot_path.subscribe(
-                JointState, "/joint_states", self.values["queue_depth"], self._on_state_bytes
-            )
-            self.delivery = self.hot_path.delivery(sub)
+        streams = {"/joint_states": self._on_state_bytes}
+        if self.join is not None:  # the setpoints first: they usually come first
+            streams = {"/joint_setpoints": self._on_setpoint_bytes, **streams}
+        depth = self.values["queue_depth"]
+        for topic, handler in streams.items():
+            if self.values["in_process"]:
+                self._leave_in_process.append(in_process.subscribe(
+                    self.context, topic, self.hot_path.guarded(handler)))  # fmt: skip
+            else:
+                sub = self.hot_path.subscribe(JointState, topic, depth, handler)
+                if topic == "/joint_states":
+                    self.delivery = self.hot_path.delivery(sub)
+        if not self.values["in_process"]:
             self.hot_path.start()
 
     def destroy_node(self) -> None:
-        if self._leave_in_process is not None:
-            self._leave_in_process()
+        for leave in self._leave_in_process:
+            leave()
         if not self.hot_path.stop():
             self.get_logger().error("hot path thread still running: node left undestroyed")
             return
@@ -423,16 +268,16 @@ class ContactEstimatorNode(Node):
         except SampleRejectedError as err:
             self._warn(f"rejected /joint_commands: {err}")
 
-    def _decode(self, data: bytes) -> JointStateFields | None:
-        """Called with ``self.lock`` held (the reader keeps the stream's layout)."""
+    def _decode(self, data: bytes, topic: str) -> JointStateFields | None:
+        """Called with ``self.lock`` held (a reader keeps its stream's layout)."""
         try:
-            return self._reader(data)
+            return self._readers[topic](data)
         except CdrError as fast_error:
             try:  # what core.cdr does not read (big-endian CDR): rclpy's deserializer
                 msg = deserialize_message(data, JointState)
             except Exception:  # noqa: BLE001 - any failure means the bytes are not a JointState
                 self.pipeline.reject("undecodable", str(fast_error))
-                self._warn(f"rejected /joint_states: not a JointState ({fast_error})")
+                self._warn(f"rejected {topic}: not a JointState ({fast_error})")
                 return None
         stamp = msg.header.stamp
         return JointStateFields(
@@ -443,35 +288,85 @@ class ContactEstimatorNode(Node):
     def _on_state_bytes(self, data: bytes) -> None:
         started = time.perf_counter()
         with self.lock:
-            sample = self._decode(data)
+            sample = self._decode(data, "/joint_states")
             if sample is None:
                 return
-            stamp_ns = sample.stamp_ns
             self._period_arrivals += 1
+            state = StateSample(
+                sample.stamp_ns, sample.name, list(sample.position), list(sample.velocity)
+            )
+            now = time.monotonic()
+            self._estimate(self.join.sample(state, now) if self.join else [Paired(state, None)])
+            self.handler_time.add(time.perf_counter() - started)
+
+    def _on_setpoint_bytes(self, data: bytes) -> None:
+        """The driver's setpoints of a sample (``core.setpoint_join``): the samples they free."""
+        with self.lock:
+            setpoint = self._decode(data, "/joint_setpoints")
+            if setpoint is None or self.join is None:
+                return
             try:
-                estimates, events = self.pipeline.sample(
-                    stamp_ns,
-                    sample.name,
-                    list(sample.position),
-                    list(sample.velocity),
+                ready = self.join.setpoint(
+                    setpoint.stamp_ns,
+                    setpoint.name,
+                    list(setpoint.position),
+                    list(setpoint.velocity),
+                    time.monotonic(),
                 )
+            except ValueError as err:
+                self.pipeline.reject("bad_setpoint", str(err))
+                self._warn(f"rejected /joint_setpoints: {err}")
+                return
+            self._estimate(ready)
+
+    def _expire_waiting(self) -> None:
+        join = self.join
+        if join is not None and join.waiting:
+            # a setpoint publisher in the graph, none heard yet: it is being matched
+            expected = not join.active and self.count_publishers("/joint_setpoints") > 0
+            with self.lock:
+                join.expected = expected
+                self._estimate(join.expire(time.monotonic()))
+
+    def _estimate(self, ready: list[Paired]) -> None:
+        """Estimate and publish samples in order; called with ``self.lock`` held."""
+        for paired in ready:
+            state = paired.sample
+            args = (state.stamp_ns, state.names, state.positions, state.velocities)
+            try:
+                if paired.setpoints is not None:  # (only a position_error pipeline pairs)
+                    assert isinstance(self.pipeline, EstimatorPipeline)
+                    estimates, events = self.pipeline.sample(*args, paired.setpoints)
+                else:
+                    estimates, events = self.pipeline.sample(*args)
             except SampleRejectedError as err:
                 self._warn(f"rejected /joint_states: {err}")
-                return
+                continue
             for event in events:  # first: a behavior waits for them
-                self._publish_event(event, stamp_ns)
+                self._publish_event(event, state.stamp_ns)
+            sec, nanosec = stamps.split(state.stamp_ns)
             out = encode_joint_state(
-                sample.sec,
-                sample.nanosec,
+                sec,
+                nanosec,
                 "",
                 [e.joint for e in estimates],
                 position=[e.error_rad for e in estimates],
                 effort=[e.torque_nm for e in estimates],
             )
             # the age at the publish call, as the source's stamp is (delivery is after both)
-            self.sample_age.add((time.time_ns() - stamp_ns) * 1e-9)
+            self.sample_age.add((time.time_ns() - state.stamp_ns) * 1e-9)
             self._estimate_pub.publish(out)
-            self.handler_time.add(time.perf_counter() - started)
+        if self.join is not None:
+            without, stopped = self.join.take_news()
+            if without:
+                self.get_logger().info(
+                    f"no /joint_setpoints for {', '.join(without)} (a source without them): "
+                    "theta_d from /joint_commands"
+                )
+            for joint in stopped:
+                self.get_logger().warning(
+                    f"/joint_setpoints stopped naming {joint}: theta_d from /joint_commands"
+                )
 
     def _publish_event(self, event: ContactEvent, stamp_ns: int) -> None:
         """Publish an event of the sample stamped ``stamp_ns`` (the sample that triggered it)."""
@@ -500,6 +395,9 @@ class ContactEstimatorNode(Node):
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Any:
         with self.lock:
             self.pipeline.reset()
+            if self.join is not None:
+                self.join.reset()
+                self._missing_seen = 0
             self.handler_time.reset()
             self.sample_age.reset()
             self.onset_age.reset()
@@ -522,15 +420,24 @@ class ContactEstimatorNode(Node):
             rejected_by = dict(sorted(self.pipeline.rejected.items()))
             samples, events = self.pipeline.samples, self.events_published
             ages = {"sample_age": self.sample_age.copy(), "onset_age": self.onset_age.copy()}
+            theta_d = self._theta_d_values()
         rejected = sum(rejected_by.values())
         problems = [f"{rejected} samples rejected"] if rejected else []
+        missing = theta_d.get("setpoints_missing", 0) - self._missing_seen
+        self._missing_seen += missing
+        if missing:
+            problems.append(
+                f"{missing} samples without their /joint_setpoints: theta_d taken from "
+                "/joint_commands (setpoints lost, or setpoint_wait_s too short)"
+            )
         if isinstance(self.pipeline, AwaitingModel):
             problems.insert(0, "waiting for a URDF on /robot_description")
         delivery = self._delivery_values(problems)
         if self.hot_path.priority_error:
             problems.append(self.hot_path.priority_error)
         status.level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
-        status.message = "; ".join(problems) or "ok"
+        notes = [theta_d.pop("note")] if "note" in theta_d else []
+        status.message = "; ".join(problems + notes) or "ok"
         values: dict[str, Any] = {
             "joint_states_rate_hz": f"{rate:.1f}", "samples": samples,
             "rejected_total": rejected, "events_published": events,
@@ -546,12 +453,37 @@ class ContactEstimatorNode(Node):
             for q in (50, 99):
                 values[f"{key}_p{q}_us"] = f"{hist.percentile(q) * 1e6:.{digits}f}"
             values[f"{key}_max_us"] = f"{hist.max_s * 1e6:.{digits}f}"
+        values.update(theta_d)
         values.update({f"rejected_{k}": v for k, v in rejected_by.items()})
         values.update(delivery)
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(array)
+
+    def _theta_d_values(self) -> dict[str, Any]:
+        """Where theta_d came from, and the largest difference, at the latest samples, between
+        the driver's setpoint and the latest /joint_commands (with ``self.lock`` held)."""
+        pipeline, join = self.pipeline, self.join
+        if not isinstance(pipeline, EstimatorPipeline):
+            return {"theta_d_source": "/joint_commands efforts (momentum observer)"}
+        values: dict[str, Any] = {
+            "theta_d_source": "/joint_setpoints" if join and join.active else "/joint_commands",
+            "samples_not_driven": pipeline.not_driven,
+        }
+        if join is not None:
+            values.update(setpoints_matched=join.matched, setpoints_missing=join.missing,
+                          samples_without_setpoints=join.unpaired_samples)  # fmt: skip
+        gap, joint = max(((g, j) for j, g in pipeline.theta_d_gap.items()), default=(0.0, ""))
+        values["theta_d_gap_max_rad"] = f"{gap:.4g}"
+        if gap > GAP_NOTED_RAD:
+            values["theta_d_gap_joint"] = joint
+            values["note"] = (
+                f"{joint}: the driver's theta_d differs from the last /joint_commands by "
+                f"{gap:.3g} rad (clamped, held after its command timeout, or a command one of "
+                "them missed); tau_hat uses the driver's"
+            )
+        return values
 
     def _delivery_values(self, problems: list[str]) -> dict[str, Any]:
         """/joint_states received and lost on the way (publication sequence numbers), since

@@ -94,13 +94,13 @@ def subcommand_table() -> str:
 def _node_tables() -> dict[str, Callable[[], Sequence[ParamSpec]]]:
     from transparency_ros.ros import (  # noqa: PLC0415
         actuator_driver,
-        contact_estimator,
+        estimator_params,
         feel_cage_behavior,
     )
 
     return {
         "actuator_driver": lambda: actuator_driver.PARAMETERS,
-        "contact_estimator": lambda: contact_estimator.PARAMETERS,
+        "contact_estimator": lambda: estimator_params.PARAMETERS,
         "feel_cage_behavior": feel_cage_behavior.parameters,
     }
 

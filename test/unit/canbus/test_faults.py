@@ -46,7 +46,7 @@ class Rig:
         self.loop.on_sample = self._on_sample
         self.loop.on_fault = self.faults.append
 
-    def _on_sample(self, sample: Feedback, at_s: float) -> None:
+    def _on_sample(self, sample: Feedback, at_s: float, _applied: object) -> None:
         self.published.append(at_s)
 
     def run(self) -> None:

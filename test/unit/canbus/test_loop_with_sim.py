@@ -192,7 +192,7 @@ def test_a_late_reply_is_published_at_its_bus_time_not_taken_for_the_next_answer
     core = DriverCore(DriverSettings(reply_silence_s=0.008))
     samples: list[tuple[float, float]] = []
     loop = ControlLoop(client, core, rate_hz=500.0, reply_timeout_s=0.001,
-                       on_sample=lambda fb, t: samples.append((fb.position_rad, t)))  # fmt: skip
+                       on_sample=lambda fb, t, _: samples.append((fb.position_rad, t)))  # fmt: skip
     try:
         core.activate(0.0)
         physics.state.motor_position_rad = 0.25

@@ -37,8 +37,6 @@ from transparency_ros.canbus.protocol import (
 )
 from transparency_ros.canbus.sim_device import SimulatedActuator
 from transparency_ros.canbus.sim_robot import SimulatedBus, SimulatedBuses
-from transparency_ros.core import stamps
-from transparency_ros.core.cdr import encode_joint_state
 from transparency_ros.core.driver import (
     CommandRejectedError,
     DriverCore,
@@ -63,6 +61,7 @@ from transparency_ros.ros.actuator_driver.hardware import (
     start_simulated_buses,
     start_simulation,
 )
+from transparency_ros.ros.actuator_driver.messages import encode_setpoints, encode_states
 from transparency_ros.ros.actuator_driver.parameters import (
     NODE_NAME,
     PARAMETERS,
@@ -105,6 +104,7 @@ class ActuatorDriverNode(LifecycleNode):
         self.sim_buses: list[SimulatedBus] = []
         self._sim_runner: SimulatedBuses | None = None
         self._joint_pub: Any = None
+        self._setpoint_pub: Any = None
         self._command_sub: Any = None
         self._safe_lock = threading.Lock()
         # time.monotonic() -> this node's ROS time, measured robustly (canbus/clock.py)
@@ -279,6 +279,8 @@ class ActuatorDriverNode(LifecycleNode):
 
     def _create_topics(self) -> None:
         self._joint_pub = self.create_lifecycle_publisher(JointState, "/joint_states", 10)
+        if self.values["publish_setpoints"]:
+            self._setpoint_pub = self.create_lifecycle_publisher(JointState, "/joint_setpoints", 10)
         self._command_sub = self.create_subscription(
             JointState, "/joint_commands", self._on_command, 10
         )
@@ -386,9 +388,10 @@ class ActuatorDriverNode(LifecycleNode):
         if self._command_sub is not None:
             self.destroy_subscription(self._command_sub)
             self._command_sub = None
-        if self._joint_pub is not None:
-            self.destroy_lifecycle_publisher(self._joint_pub)
-            self._joint_pub = None
+        for pub in (self._joint_pub, self._setpoint_pub):
+            if pub is not None:
+                self.destroy_lifecycle_publisher(pub)
+        self._joint_pub = self._setpoint_pub = None
         if isinstance(self.loop, MultiControlLoop):
             self.loop.close()
         if self.client is not None:
@@ -426,49 +429,36 @@ class ActuatorDriverNode(LifecycleNode):
         """A time.monotonic() instant on this node's ROS clock."""
         return self._to_ros(monotonic_s)
 
-    def _publish_sample(self, fb: Feedback, sampled_s: float) -> None:
-        pub = self._joint_pub
+    def _publish_sample(self, fb: Feedback, sampled_s: float, applied: Any) -> None:
+        # stamped when the reply was on the bus (see canbus.loop), not when read or published
+        self._publish_states(self._ros_seconds_at(sampled_s), [self.values["joint_name"]],
+                             [fb], [applied])  # fmt: skip
+
+    def _publish_states(self, stamp_s: float, names: list[str], feedback: Any, applied: Any
+                        ) -> None:  # fmt: skip
+        """Publish a sample and its setpoints (``messages``), the setpoints first (an estimator
+        composed into this process then has them when the sample comes), from the hardware
+        thread; a signal may shut the context down meanwhile (the loop is being stopped then,
+        and the motors disabled): that sample is dropped quietly."""
+        pub, setpoints = self._joint_pub, self._setpoint_pub
         if pub is None:
             return
-        # when the reply was on the bus (see canbus.loop), not when read or published
-        sec, nanosec = stamps.split(stamps.from_seconds(self._ros_seconds_at(sampled_s)))
-        data = encode_joint_state(
-            sec,
-            nanosec,
-            "",
-            [self.values["joint_name"]],
-            position=[fb.position_rad],
-            velocity=[fb.velocity_rad_s],
-            effort=[fb.torque_nm],
-        )
-        # serialized here (cheaper than rclpy's message objects), and handed directly to an
-        # estimator composed into this process (ros.in_process)
-        self._publish_states(pub, data)
-
-    def _publish_states(self, pub: Any, data: bytes) -> None:
-        """Publish from the hardware thread; a signal may shut the context down meanwhile (the
-        loop is being stopped then, and the motors disabled): that sample is dropped quietly."""
         try:
+            if setpoints is not None:
+                data = encode_setpoints(stamp_s, names, applied)
+                in_process.publish(setpoints, self.context, "/joint_setpoints", data)
+            data = encode_states(stamp_s, names, feedback)
             in_process.publish(pub, self.context, "/joint_states", data)
         except _rclpy.RCLError:
             if self.context.ok():
                 raise
 
     def _publish_robot_sample(self, sample: RobotSample) -> None:
-        pub, loop = self._joint_pub, self.loop
-        if pub is None or not isinstance(loop, MultiControlLoop):
-            return
-        sec, nanosec = stamps.split(stamps.from_seconds(self._ros_seconds_at(sample.stamp_s)))
-        data = encode_joint_state(
-            sec,
-            nanosec,
-            "",
-            [loop.motors[i].name for i in sample.indices],
-            position=[fb.position_rad for fb in sample.feedback],
-            velocity=[fb.velocity_rad_s for fb in sample.feedback],
-            effort=[fb.torque_nm for fb in sample.feedback],
-        )
-        self._publish_states(pub, data)
+        loop = self.loop
+        if isinstance(loop, MultiControlLoop):
+            names = [loop.motors[i].name for i in sample.indices]
+            stamp_s = self._ros_seconds_at(sample.stamp_s)
+            self._publish_states(stamp_s, names, sample.feedback, sample.commands)
 
     def _on_motors_command(self, msg: JointState, now: float) -> None:
         """A command for several motors: by name, all or nothing (one bad joint rejects the

@@ -175,6 +175,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         low=1e-5,
         high=1.0,
     ),
+    P(
+        "publish_setpoints",
+        True,
+        "publish /joint_setpoints: the setpoint each motor followed, stamped like its "
+        "/joint_states sample (the estimator computes tau_hat against it)",
+        read_only=True,
+    ),
     P("autostart", True, "configure and activate on start", read_only=True),
     P(
         "gil_switch_interval_s",
