@@ -6,7 +6,6 @@ feel_cage_behavior as their own processes; about 10 s per cell.
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 
@@ -16,6 +15,7 @@ pytest.importorskip("rclpy")
 
 from transparency_ros.analysis import feelcage_sim as sim
 from transparency_ros.core import feel_cage as fc
+from transparency_ros.core import strict_json
 from transparency_ros.core.config import get_actuator
 from transparency_ros.ros.feelcage_run import CellRun
 
@@ -38,7 +38,7 @@ def _run_cell_in_a_fresh_process(actuator: str, ball: str) -> CellRun:
         capture_output=True, text=True, timeout=180, check=False,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr[-2000:]
-    data = json.loads(done.stdout.strip().splitlines()[-1])
+    data = strict_json.loads(done.stdout.strip().splitlines()[-1])
     record = data.pop("record")
     record["outcome"] = fc.Outcome(record["outcome"])
     return CellRun(record=fc.TrialRecord(**record), **data)

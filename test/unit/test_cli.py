@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import shutil
@@ -14,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from transparency_ros.cli import main
+from transparency_ros.core import strict_json
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -27,7 +27,7 @@ def run_cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, s
 def test_model_json_single_point(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, _ = run_cli(capsys, "model", "--actuator", "U10DD", "--energy", "0.5", "--json")
     assert code == 0
-    data = json.loads(out)
+    data = strict_json.loads(out)
     assert data["actuator"] == "U10DD" and data["regime"] == "underdamped"
     (row,) = data["results"]
     assert row["energy_j"] == 0.5 and row["detected"] is True
@@ -41,7 +41,7 @@ def test_model_json_not_detected_is_null(capsys: pytest.CaptureFixture[str]) -> 
         capsys, "model", "--actuator", "U10GB", "--actuator", "EC60", "--energy", "0.5", "--json"
     )
     assert code == 0
-    u10gb, ec60 = json.loads(out)
+    u10gb, ec60 = strict_json.loads(out)
     assert u10gb["results"][0]["detected"] is False
     assert u10gb["results"][0]["t_r_s"] is None and u10gb["results"][0]["delta_e_j"] is None
     assert ec60["results"][0]["detected"] is True
@@ -63,7 +63,7 @@ def test_model_curves_plot_and_json(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert code == 0
     assert png.read_bytes()[:8] == PNG_MAGIC and png.stat().st_size > 20_000
     assert str(png) in err
-    curves = json.loads(out)["curves"]
+    curves = strict_json.loads(out)["curves"]
     assert [c["actuator"] for c in curves] == ["U10DD", "EC60", "T2822", "U10GB"]
     slopes = [c["delta_e_slope"] for c in curves]
     assert slopes == sorted(slopes)
@@ -133,7 +133,7 @@ def test_demo_produces_what_it_lists(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert len(listed) == 3
     for path in listed:
         assert Path(path).stat().st_size > 0
-    summary = json.loads((tmp_path / "actuators_summary.json").read_text())
+    summary = strict_json.loads((tmp_path / "actuators_summary.json").read_text())
     assert [s["actuator"] for s in summary] == ["U10DD", "EC60", "T2822", "U10GB"]
 
 

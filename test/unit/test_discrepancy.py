@@ -12,6 +12,7 @@ import pytest
 from transparency_ros.analysis.discrepancy.discover import discover
 from transparency_ros.analysis.discrepancy.effects import ParameterDrift, library
 from transparency_ros.analysis.discrepancy.model import Trial, load_nominal
+from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.synth.campaign import OUTSIDE, write_campaign
 
@@ -163,7 +164,7 @@ def test_import_csv_then_discrepancy_json_and_report(tmp_path: Path) -> None:
             ]
         )
     assert code == 0
-    result = json.loads(buffer.getvalue())
+    result = strict_json.loads(buffer.getvalue())
     assert [f["effect"] for f in result["findings"]] == ["torque_offset"]
     finding = result["findings"][0]
     assert set(finding) >= {

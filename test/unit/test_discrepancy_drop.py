@@ -17,6 +17,7 @@ from transparency_ros.analysis.discrepancy.drop import (
     load_drop_trial,
 )
 from transparency_ros.bag.reader import find_bags
+from transparency_ros.core import strict_json
 from transparency_ros.synth.drop_campaign import write_drop_campaign
 
 
@@ -48,7 +49,7 @@ def test_the_shuttles_weight_on_the_arm_is_found_and_measured_through_the_comman
     out = write_drop_campaign(tmp_path / "c", 2, hidden=["payload_gravity"], actuator="EC60")
     report_dir = tmp_path / "report"
     assert main(["discrepancy", str(out / "bags"), "--json", "--report", str(report_dir)]) == 0
-    report = json.loads(capsys.readouterr().out)
+    report = strict_json.loads(capsys.readouterr().out)
     truth = json.loads((out / "labels.json").read_text())["hidden"]["payload_gravity"]
     first = report["findings"][0]
     assert first["effect"] == "payload_gravity"

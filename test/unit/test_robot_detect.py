@@ -97,7 +97,7 @@ def test_the_score_counts_pulses_found_false_alarms_and_the_delay_from_half_the_
     s = rd.score([det], [rec])
     assert (s.pulses, s.found, s.false_alarms) == (3, 2, 2)
     assert s.delays_s == pytest.approx([0.010, 0.020])
-    assert s.missed == [f"r a at {pulses[1].half_s:.2f} s"]
+    assert [(m.recording, m.joint, m.half_s) for m in s.missed] == [("r", "a", pulses[1].half_s)]
     assert s.alarms_per_minute == pytest.approx(2 / (rec.duration_s / 60))
     only_b = rd.score([det], [rec], joint=1)
     assert (only_b.pulses, only_b.found, only_b.false_alarms) == (1, 1, 0)
@@ -301,3 +301,22 @@ def test_import_csv_of_several_joints_refuses_bad_input_and_writes_nothing(
     args = ["import-csv", good, "--out", str(tmp_path / "x"), "--joints", "a,b"]
     assert main([*args, "--columns", "time=time,speed=v{}"]) == 2
     assert "'speed=v{}' is not one of" in capsys.readouterr().err
+
+
+def test_episodes_give_each_onset_its_release_and_signed_peak() -> None:
+    t = np.arange(30) * 0.002
+    residual = np.zeros((30, 1))
+    residual[10:15, 0] = [-2.0, -2.5, -3.0, -1.0, -0.8]  # onset at 10, peak -3 at 12
+    residual[15, 0] = -0.5  # back to half the threshold: released here (as the node does)
+    residual[25:, 0] = 1.5  # a second contact still on at the end
+    det = rd.with_threshold(
+        JointRecording("r", (t * 1e9).astype(np.int64), ("a",), residual, residual, residual),
+        residual,
+        np.ones(1),
+    )
+    assert det.onsets_s == [[pytest.approx(t[10]), pytest.approx(t[25])]]
+    ((first, second),) = rd.episodes(det)
+    assert (first.onset_s, first.release_s) == pytest.approx((t[10], t[15]))
+    assert first.peak_residual == -3.0
+    assert second.onset_s == pytest.approx(t[25])
+    assert (second.release_s, second.peak_residual) == (None, 1.5)

@@ -108,9 +108,11 @@ def read_text(path: Path) -> str:
 
 
 def read_joint_csv(
-    path: str | Path, joints: Sequence[str], columns: Columns | None = None
+    path: str | Path, joints: Sequence[str], columns: Columns | None = None, *, exact: bool = False
 ) -> JointRecording:
-    """The recording in ``path``; column k (1-based) of each pattern is ``joints[k - 1]``."""
+    """The recording in ``path``; column k (1-based) of each pattern is ``joints[k - 1]``.
+    ``exact``: a file with columns for more joints than ``joints`` is refused (the joints came
+    from a URDF, not from the user: most likely another robot's)."""
     cols = columns or Columns()
     p = Path(path)
     reader = csv.reader(io.StringIO(read_text(p)))
@@ -144,6 +146,14 @@ def read_joint_csv(
             return None
         return per_joint(pattern)
 
+    more = [cols.position.format(k) for k in range(len(joints) + 1, len(header) + 2)]
+    extra = [name for name in more if name in index]
+    if exact and extra:
+        raise ConfigError(
+            f"{p}: columns for {len(joints) + len(extra)} joints ({cols.position.format(1)} .. "
+            f"{extra[-1]}), the URDF has {len(joints)} ({', '.join(joints)}): another robot's "
+            "URDF? (--joints names the ones to use)"
+        )
     t = column(cols.time)
     stamps = np.round((t - t[0]) * 1e9).astype(np.int64)
     keep = np.r_[True, np.diff(stamps) > 0]

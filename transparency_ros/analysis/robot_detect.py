@@ -37,6 +37,7 @@ from transparency_ros.core.robot_model import RobotModel
 PULSE_LEVEL_NM = 0.05
 GRACE_S = 0.1
 ALARM_MERGE_S = 0.2
+RELEASE_RATIO = 0.5  # a contact ends below this share of the threshold (as in the node)
 TEXTBOOK_MARGIN = 1.01  # "just above" the largest residual without contact
 CHANCE_SHIFTS_S = (1.3, 2.6, 3.9)  # the labels moved in time (circularly within a recording)
 
@@ -60,6 +61,25 @@ class Pulse:
     peak: float
 
 
+@dataclass(frozen=True)
+class Episode:
+    """One contact as a detector saw it on one joint."""
+
+    onset_s: float  # the stamp of the sample that crossed the threshold
+    release_s: float | None  # the first sample back below half of it (None: still on at the end)
+    peak_residual: float  # the residual of largest magnitude in between, signed [N m] or [rad]
+
+
+@dataclass(frozen=True)
+class MissedPulse:
+    recording: str
+    joint: str
+    start_s: float
+    half_s: float  # first sample at half the peak
+    end_s: float
+    peak_nm: float
+
+
 @dataclass
 class Score:
     pulses: int = 0
@@ -68,7 +88,7 @@ class Score:
     minutes: float = 0.0
     judged_share: float = 0.0  # of the samples, where the threshold is finite
     delays_s: list[float] = field(default_factory=list)
-    missed: list[str] = field(default_factory=list)
+    missed: list[MissedPulse] = field(default_factory=list)
 
     @property
     def recall(self) -> float:
@@ -132,7 +152,7 @@ def with_threshold(recording: JointRecording, residual: FloatArray, per_joint: F
 
 
 def _detect(recording: JointRecording, residual: FloatArray, threshold: FloatArray) -> Detection:
-    settings = DetectorSettings(contact_onset=1.0, contact_release=0.5)
+    settings = DetectorSettings(contact_onset=1.0, contact_release=RELEASE_RATIO)
     detector = SchmittDetector(default=settings)
     onsets: list[list[float]] = [[] for _ in recording.joints]
     ratio = np.abs(residual) / threshold
@@ -143,6 +163,28 @@ def _detect(recording: JointRecording, residual: FloatArray, threshold: FloatArr
                     onsets[j].append(event.stamp_ns * 1e-9)
     t = np.asarray(recording.stamps_ns * 1e-9, dtype=np.float64)
     return Detection(recording.name, recording.joints, t, residual, threshold, onsets)
+
+
+def episodes(det: Detection) -> list[list[Episode]]:
+    """Per joint, each onset with its release and peak: the release is the first sample after
+    the onset where |residual| falls to ``RELEASE_RATIO`` of the threshold, the level both
+    detectors here release at (a threshold of inf, where the detector does not judge, releases
+    too)."""
+    out: list[list[Episode]] = []
+    for j, onsets in enumerate(det.onsets_s):
+        with np.errstate(invalid="ignore"):
+            ratio = np.abs(det.residual[:, j]) / det.threshold[:, j]
+        found = []
+        for onset in onsets:
+            k0 = int(np.searchsorted(det.t_s, onset))
+            below = np.flatnonzero(ratio[k0 + 1 :] <= RELEASE_RATIO)
+            end = k0 + 1 + int(below[0]) if below.size else None
+            span = det.residual[k0 : (end if end is not None else det.t_s.size), j]
+            peak = float(span[np.argmax(np.abs(span))]) if span.size else float("nan")
+            release = float(det.t_s[end]) if end is not None else None
+            found.append(Episode(float(onset), release, peak))
+        out.append(found)
+    return out
 
 
 def pulses(recording: JointRecording) -> list[Pulse]:
@@ -188,7 +230,8 @@ def score(
                     total.delays_s.append(max(0.0, float(times[hit][0]) - p.half_s))
                     used |= hit
                 else:
-                    total.missed.append(f"{rec.name} {rec.joints[j]} at {p.half_s:.2f} s")
+                    total.missed.append(MissedPulse(
+                        rec.name, rec.joints[j], p.start_s, p.half_s, p.end_s, p.peak))  # fmt: skip
             alarms = times[~used]
             if alarms.size:
                 total.false_alarms += 1 + int(np.count_nonzero(np.diff(alarms) > ALARM_MERGE_S))

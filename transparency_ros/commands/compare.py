@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from typing import Any
 
 from transparency_ros.analysis.estimator_comparison import compare
+from transparency_ros.core import strict_json
 
 
 def register(subparsers: Any) -> None:
@@ -54,8 +54,7 @@ def run(args: argparse.Namespace) -> int:
                     "false_alarms": s.false_alarms,
                 })  # fmt: skip
     if args.json:
-        json.dump(rows, sys.stdout, indent=2)
-        print()
+        strict_json.dump(rows, sys.stdout)
         return 0
     print(f"{args.pulses} pulses each; thresholds from a quiet recording + 0.02 N m equivalent")
     print(

@@ -7,7 +7,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import time
 from pathlib import Path
@@ -16,6 +15,7 @@ from typing import Any
 from transparency_ros.analysis.fig2 import model_curves, plot_fig2
 from transparency_ros.commands.model import curves_report, model_summary
 from transparency_ros.commands.rig import parse_heights
+from transparency_ros.core import strict_json
 from transparency_ros.core.config import load_actuators, load_drop_test
 from transparency_ros.core.contact_model import ContactModel
 
@@ -57,9 +57,9 @@ def run(args: argparse.Namespace) -> int:
     curves = model_curves(models)
     png = plot_fig2(curves, out / "fig2_model.png")
     data = out / "fig2_model.json"
-    data.write_text(json.dumps({"curves": curves_report(curves)}), encoding="utf-8")
+    data.write_text(strict_json.dumps({"curves": curves_report(curves)}, None), encoding="utf-8")
     summary = out / "actuators_summary.json"
-    summary.write_text(json.dumps([model_summary(m) for m in models], indent=2), encoding="utf-8")
+    summary.write_text(strict_json.dumps([model_summary(m) for m in models]), encoding="utf-8")
 
     print(f"  {'actuator':<8} {'regime':<12} {'min. detectable T [J]':>22} {'t_r at 1 J [ms]':>16}")
     for c in curves:
@@ -142,9 +142,8 @@ def _rig_step(out: Path, heights: list[float]) -> list[tuple[Path, str]]:
     )
     data = out / "fig2_measured.json"
     data.write_text(
-        json.dumps(
-            {"trials": [r.as_dict() for r in results], "summary": [vars(s) for s in summary]},
-            indent=2,
+        strict_json.dumps(
+            {"trials": [r.as_dict() for r in results], "summary": [vars(s) for s in summary]}
         ),
         encoding="utf-8",
     )

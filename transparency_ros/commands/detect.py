@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import argparse
 import glob
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 
 METHODS = ("momentum_observer", "textbook", "position_error")
@@ -87,7 +87,12 @@ def register(subparsers: Any) -> None:
         help="desired-position column pattern (in bags: /joint_commands' positions)",
     )
     d.add_argument("--report", metavar="DIR", help="write a plot per recording here")
-    d.add_argument("--json", action="store_true", help="print the score as JSON")
+    d.add_argument(
+        "--json",
+        action="store_true",
+        help="print as JSON: per recording and joint the contacts (onset, release, peak "
+        "residual); with --labels the scores per joint and the missed pulses",
+    )
     d.set_defaults(func=run_detect)
 
 
@@ -118,11 +123,17 @@ def _recordings(
     topic = None if labels is None else (labels if labels.startswith("/") else LABEL_TOPIC)
     files = [f for p in paths for f in (sorted(glob.glob(p)) or [p])]
     recordings = [
-        read_joint_csv(f, joints, columns)
+        read_joint_csv(f, joints, columns, exact=not args.joints)
         if ".csv" in Path(f).name
         else read_joint_bag(f, joints, topic)
         for f in files
     ]
+    if labels is not None and recordings and all(r.label is None for r in recordings):
+        column = columns.label.format(1) if columns.label else labels
+        raise ConfigError(
+            f"--labels {labels}: no recording has them (a CSV's column {column!r}, a bag's "
+            f"topic {topic})"
+        )
     for rec in recordings:
         for note in rec.notes:
             print(f"note: {note}", file=sys.stderr)
@@ -180,36 +191,65 @@ def run_detect(args: argparse.Namespace) -> int:
 
         for det, rec in zip(detections, recordings, strict=True):
             print(f"wrote {plot_detection(Path(args.report), det, rec)}")
-    scores = {
-        joint: rd.score(detections, recordings, joint=j)
-        for j, joint in enumerate(model.joint_names)
-    }
-    chance = {
-        joint: rd.by_chance(detections, recordings, joint=j).recall
-        for j, joint in enumerate(model.joint_names)
-    }
+    scores = chance = None
+    if args.labels:  # without labels there is nothing to score: onsets are not false alarms
+        scores = {
+            joint: rd.score(detections, recordings, joint=j)
+            for j, joint in enumerate(model.joint_names)
+        }
+        chance = {
+            joint: rd.by_chance(detections, recordings, joint=j).recall
+            for j, joint in enumerate(model.joint_names)
+        }
     if args.json:
-        json.dump(
-            {j: {**_as_dict(s), "recall_by_chance": chance[j]} for j, s in scores.items()},
-            sys.stdout,
-            indent=2,
-        )
-        print()
+        strict_json.dump(_report(args, detections, recordings, scores, chance), sys.stdout)
         return 0
     for det in detections:
         for joint, onsets in zip(det.joints, det.onsets_s, strict=True):
             times = ", ".join(f"{t:.3f}" for t in onsets) or "none"
             print(f"{det.recording} {joint}: contact onsets at [s] {times}")
-    if args.labels:
-        for joint, s in scores.items():
-            print(
-                f"{joint}: {s.found}/{s.pulses} pulses found, {s.false_alarms} false alarms "
-                f"({s.alarms_per_minute:.1f} per minute), delay median "
-                f"{s.delay_s(50) * 1e3:.0f} ms, p90 {s.delay_s(90) * 1e3:.0f} ms; "
-                f"{chance[joint]:.0%} of the pulses would be found by chance (the same onsets "
-                "against the labels moved in time)"
-            )
+    for joint, s in (scores or {}).items():
+        assert chance is not None
+        print(
+            f"{joint}: {s.found}/{s.pulses} pulses found, {s.false_alarms} false alarms "
+            f"({s.alarms_per_minute:.1f} per minute), delay median "
+            f"{_ms(s.delay_s(50))}, p90 {_ms(s.delay_s(90))}; "
+            f"{chance[joint]:.0%} of the pulses would be found by chance (the same onsets "
+            "against the labels moved in time)"
+        )
     return 0
+
+
+def _ms(seconds: float) -> str:
+    return "n/a" if np.isnan(seconds) else f"{seconds * 1e3:.0f} ms"
+
+
+def _report(
+    args: argparse.Namespace,
+    detections: list[Any],
+    recordings: list[Any],
+    scores: dict[str, Any] | None,
+    chance: dict[str, float] | None,
+) -> dict[str, Any]:
+    """``detect --json``: per recording and joint the contacts (onset and release stamps [s],
+    the peak residual); with labels, per joint the scores, the missed pulses as data."""
+    from transparency_ros.analysis import robot_detect as rd  # noqa: PLC0415
+
+    per_recording = []
+    for det, rec in zip(detections, recordings, strict=True):
+        joints = {}
+        for joint, found in zip(det.joints, rd.episodes(det), strict=True):
+            joints[joint] = {"contacts": [vars(e) for e in found]}
+        per_recording.append({"recording": det.recording, "duration_s": rec.duration_s,
+                              "labelled": rec.label is not None, "joints": joints})  # fmt: skip
+    return {
+        "method": args.method,
+        "residual_unit": "rad" if args.method == "position_error" else "N m",
+        "recordings": per_recording,
+        "scores": None if scores is None or chance is None else {
+            j: {**_as_dict(s), "recall_by_chance": chance[j]} for j, s in scores.items()
+        },
+    }  # fmt: skip
 
 
 def _as_dict(s: Any) -> dict[str, Any]:
@@ -218,5 +258,5 @@ def _as_dict(s: Any) -> dict[str, Any]:
         "false_alarms": s.false_alarms, "alarms_per_minute": s.alarms_per_minute,
         "delay_median_s": s.delay_s(50), "delay_p90_s": s.delay_s(90),
         "judged_share": s.judged_share, "missed": s.missed,
-        "minutes": s.minutes, "nan_delay": bool(np.isnan(s.delay_s(50))),
+        "minutes": s.minutes,
     }  # fmt: skip

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import argparse
 import io
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 
 TRIAL_KIND = "torque_driven"
@@ -192,8 +192,7 @@ def run_discrepancy(args: argparse.Namespace) -> int:
         for path in write_report(Path(args.report), problem, report):
             print(f"wrote {path}", file=sys.stderr)
     if args.json:
-        json.dump(report.as_dict(), sys.stdout, indent=2)
-        print()
+        strict_json.dump(report.as_dict(), sys.stdout)
         return 0
     print(f"nominal: {', '.join(f'{k} {v:g}' for k, v in report.nominal.items())}")
     print(f"held-out trials: {', '.join(report.split['heldout'])}")

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from typing import Any
 
 from transparency_ros.analysis.drop_eval import evaluate, summarise
 from transparency_ros.bag.errors import BagReadError
+from transparency_ros.core import strict_json
 
 
 def register(subparsers: Any) -> None:
@@ -56,9 +56,8 @@ def run(args: argparse.Namespace) -> int:
         plot_fig2(curves, args.plot, title=title, measured=results)
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.json:
-        json.dump({"trials": [r.as_dict() for r in results],
-                   "summary": [s.__dict__ for s in summary]}, sys.stdout, indent=2)  # fmt: skip
-        print()
+        strict_json.dump({"trials": [r.as_dict() for r in results],
+                          "summary": [s.__dict__ for s in summary]}, sys.stdout)  # fmt: skip
         return 0
     print(f"{'actuator':<8} {'h [m]':>6} {'T [J]':>7} {'t_r [ms]':>9} {'v_s,e [m/s]':>11} "
           f"{'ΔE [J]':>8} {'F_mu [N]':>9} {'F_est [N]':>9}  t_e from")  # fmt: skip

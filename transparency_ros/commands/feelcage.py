@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -17,6 +16,7 @@ from transparency_ros.analysis.feelcage_sim import (
     steady_sweep,
     time_to_cage,
 )
+from transparency_ros.core import strict_json
 from transparency_ros.core.config import get_actuator
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.feel_cage import TrialRecord
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
             })  # fmt: skip
     matches = sum(row["outcome"] == row["paper"] for row in rows)
     if args.json:
-        json.dump(
+        strict_json.dump(
             {
                 "engine": args.engine,
                 "steady_error_rad": e_s,
@@ -130,9 +130,7 @@ def run(args: argparse.Namespace) -> int:
                 "matches_paper": matches,
             },
             sys.stdout,
-            indent=2,
         )
-        print()
         return 0
     print(f"engine: {args.engine}")
     print("e_s at 1 rev/s [rad]: " + ", ".join(f"{k} {v:.3f}" for k, v in e_s.items()))

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from typing import Any
 
 from transparency_ros.analysis.fig2 import ModelCurve, model_curves, plot_fig2
+from transparency_ros.core import strict_json
 from transparency_ros.core.config import load_actuators, load_drop_test
 from transparency_ros.core.contact_model import ContactModel
 from transparency_ros.core.errors import ModelError
@@ -153,8 +153,7 @@ def _fmt(value: float | None, scale: float = 1.0, spec: str = ".4g") -> str:
 def _run_points(models: list[ContactModel], energies: list[float], as_json: bool) -> int:
     report = [{**model_summary(m), "results": _point_rows(m, energies)} for m in models]
     if as_json:
-        json.dump(report[0] if len(report) == 1 else report, sys.stdout, indent=2)
-        print()
+        strict_json.dump(report[0] if len(report) == 1 else report, sys.stdout)
         return 0
     for entry in report:
         print(
@@ -199,8 +198,7 @@ def _run_curves(models: list[ContactModel], args: argparse.Namespace) -> int:
         path = plot_fig2(curves, args.plot)
         print(f"wrote {path}", file=sys.stderr)
     if args.json:
-        json.dump({"curves": curves_report(curves)}, sys.stdout)
-        print()
+        strict_json.dump({"curves": curves_report(curves)}, sys.stdout, indent=None)
         return 0
     print(
         f"{'actuator':<8} {'regime':<12} {'zeta':>6} {'T_min [J]':>10} {'dE/dT':>7}  "

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from typing import Any
 
 from transparency_ros.bag.errors import BagReadError
 from transparency_ros.bag.salvage import salvage
+from transparency_ros.core import strict_json
 
 
 def register(subparsers: Any) -> None:
@@ -32,10 +32,9 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     report = salvage(args.bag, args.out, lambda text: print(text, file=sys.stderr, flush=True))
     if args.json:
-        json.dump({"source": str(report.source), "out": report.out and str(report.out),
-                   "kept": dict(report.kept), "recorded": report.recorded,
-                   "damage": report.damage}, sys.stdout, indent=2)  # fmt: skip
-        print()
+        strict_json.dump({"source": str(report.source), "out": report.out and str(report.out),
+                          "kept": dict(report.kept), "recorded": report.recorded,
+                          "damage": report.damage}, sys.stdout)  # fmt: skip
     else:
         for line in report.damage:
             print(f"damage: {line}")
