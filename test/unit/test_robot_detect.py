@@ -53,7 +53,7 @@ def test_a_csv_is_read_per_joint_and_a_repeated_stamp_is_dropped_with_a_note(
     assert rec.torque[:, 0].tolist() == [0.5, 0.7, 0.9]
     assert rec.label is not None and rec.label[:, 1].tolist() == [0, 0.2, 0]
     assert rec.desired is None  # no pos_des columns
-    assert rec.notes == [f"{name}: 1 rows whose time does not increase dropped"]
+    assert rec.notes == [f"{name}: 1 row whose time does not increase dropped"]
 
 
 def test_a_bad_csv_names_the_file_the_column_and_the_row(tmp_path: Path) -> None:

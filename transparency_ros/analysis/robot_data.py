@@ -155,6 +155,13 @@ def read_joint_csv(
             "URDF? (--joints names the ones to use)"
         )
     t = column(cols.time)
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:  # a repeated stamp is a logger's habit (dropped below); going back is not
+        k = int(back[0])
+        raise ConfigError(
+            f"{p}: time column {cols.time!r} goes backwards at row {k + 3}: {t[k + 1]:g} after "
+            f"{t[k]:g}"
+        )
     stamps = np.round((t - t[0]) * 1e9).astype(np.int64)
     keep = np.r_[True, np.diff(stamps) > 0]
     notes = []
@@ -162,7 +169,8 @@ def read_joint_csv(
         # a stamp repeated by the logger: the later row of the pair is dropped
         keep = np.r_[True, stamps[1:] > np.maximum.accumulate(stamps)[:-1]]
         dropped = np.count_nonzero(~keep)
-        notes.append(f"{p.name}: {dropped} rows whose time does not increase dropped")
+        rows_ = "row" if dropped == 1 else "rows"
+        notes.append(f"{p.name}: {dropped} {rows_} whose time does not increase dropped")
     position, velocity = per_joint(cols.position), per_joint(cols.velocity)
     torque = per_joint(cols.torque)
     label, desired = optional(cols.label), optional(cols.desired)

@@ -94,23 +94,11 @@ def run_import(args: argparse.Namespace) -> int:
     names = [c.strip() for c in (args.columns or "time,position,velocity,torque").split(",")]
     if len(names) != 4:
         raise ConfigError("--columns needs four names: time, position, velocity, torque")
+    runs = [(path, _single_joint_csv(path, read_text(path), names)) for path in map(Path, args.csv)]
     out = Path(args.out)
     check_writable(out)
     types = message_types()
-    for path in map(Path, args.csv):
-        text = read_text(path)
-        try:
-            header = text.splitlines()[0].split(",")
-            data = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
-        except (ValueError, IndexError) as err:
-            raise ConfigError(f"{path}: cannot read CSV: {err}") from err
-        missing = [n for n in names if n not in header]
-        if missing:
-            raise ConfigError(f"{path}: no column(s) {missing}; the header has {header}")
-        cols = [data[:, header.index(n)] for n in names]
-        if not all(np.isfinite(c).all() for c in cols):
-            raise ConfigError(f"{path}: NaN or inf in the data")
-        t, q, qd, tau = cols
+    for path, (t, q, qd, tau) in runs:  # every file read and checked before a bag is written
         bag = out / bag_name(path)
         with BagWriter(
             bag, {"transparency.trial": TRIAL_KIND, "transparency.source": path.name}
@@ -129,6 +117,45 @@ def run_import(args: argparse.Namespace) -> int:
                 writer.write_message("/joint_states", ns, msg)
         print(f"{bag}  ({t.size} samples)")
     return 0
+
+
+def _single_joint_csv(path: Path, text: str, names: list[str]) -> list[Any]:
+    """The time, position, velocity and torque columns of a one-joint CSV, checked: at least
+    two data rows, finite numbers, time increasing."""
+    lines = text.splitlines()
+    if not lines or not lines[0].strip():
+        raise ConfigError(f"{path}: empty file (no header)")
+    header = [h.strip() for h in lines[0].split(",")]
+    missing = [n for n in names if n not in header]
+    if missing:
+        raise ConfigError(f"{path}: no column(s) {missing}; the header has {header}")
+    rows = sum(1 for line in lines[1:] if line.strip())
+    if rows < 2:
+        raise ConfigError(f"{path}: {rows} data rows; at least 2 are needed")
+    try:
+        data = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
+    except ValueError as err:
+        raise ConfigError(f"{path}: cannot read CSV: {err}") from err
+    if data.shape[1] != len(header):
+        raise ConfigError(f"{path}: rows of {data.shape[1]} values under {len(header)} columns")
+    cols = [data[:, header.index(n)] for n in names]
+    if not all(np.isfinite(c).all() for c in cols):
+        raise ConfigError(f"{path}: NaN or inf in the data")
+    check_increasing(path, names[0], cols[0])
+    return cols
+
+
+def check_increasing(path: Path, name: str, t: Any) -> None:
+    """A time column that does not increase row by row is refused, naming the first row."""
+    steps = np.diff(t)
+    bad = np.flatnonzero(steps <= 0)
+    if bad.size:
+        k = int(bad[0])
+        how = "repeats" if steps[k] == 0 else "goes backwards"
+        raise ConfigError(
+            f"{path}: time column {name!r} {how} at row {k + 3}: {t[k + 1]:g} after {t[k]:g} "
+            f"({bad.size} such row{'s' if bad.size > 1 else ''})"
+        )
 
 
 def bag_name(path: Path) -> str:
