@@ -18,6 +18,7 @@ from transparency_ros.analysis.discrepancy.effects import (
 )
 from transparency_ros.analysis.discrepancy.model import NominalModel, Trial, load_nominal
 from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem
+from transparency_ros.core import strict_json
 
 PENDULUM = Path(__file__).resolve().parents[1] / "data" / "ak80_6_pendulum"
 
@@ -108,3 +109,24 @@ def test_a_recorded_torque_that_explains_little_is_said_in_terms_a_user_can_act_
     problem = TorqueDrivenProblem(wrong, [Trial("free", t, q, qd, tau)])
     assert float(np.sqrt(np.mean(problem.error([], [], True) ** 2))) > 3 * problem.noise_floor()
     assert problem.notes == []
+
+
+def test_a_recording_that_mostly_rests_is_reported_not_a_division_by_zero(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The first 5 s of the lab's gravity-compensation run, as a user runs it: import-csv, then
+    discrepancy. Its fitted windows barely move, and the noise floor came out 0
+    (ZeroDivisionError in findings.py); now the floor is the encoder's step at least."""
+    from transparency_ros.cli import main  # noqa: PLC0415
+
+    csv = PENDULUM / "gravity_compensation_first_5s.csv.xz"
+    assert main(["import-csv", str(csv), "--out", str(tmp_path / "bags")]) == 0
+    bag = tmp_path / "bags" / "gravity_compensation_first_5s"
+    capsys.readouterr()
+    args = ["discrepancy", str(bag), "--nominal", str(PENDULUM / "sp_parameters_gravity.yaml")]
+    assert main([*args, "--json"]) == 0
+    report = strict_json.loads(capsys.readouterr().out)
+    assert report["unexplained"], "a resting arm's model leaves something: said where"
+    for entry in report["unexplained"]:
+        assert entry["noise_floor_rad"] > 0
+        assert "x the noise floor" in entry["looks_like"]

@@ -128,8 +128,13 @@ def leftover(
                 "rmse_rad": rms,
                 "noise_floor_rad": floor,
                 "dominant_frequency_hz": peak,
-                "looks_like": f"residual {rms / floor:.0f}x the noise floor in phase "
-                f"'{name}'; the residual peaks near {peak:.1f} Hz",
+                "looks_like": (
+                    f"residual {rms / floor:.0f}x the noise floor in phase '{name}'"
+                    if floor > 0
+                    else f"residual {rms:.2g} rad RMS in phase '{name}' (no noise floor: the "
+                    "recorded position never changes in the windows compared)"
+                )
+                + (f"; the residual peaks near {peak:.1f} Hz" if not math.isnan(peak) else ""),
             }
             if closest is not None and closest[1] > 0:
                 names, gain = closest

@@ -86,8 +86,9 @@ def _gap_note(trials: Sequence[Trial]) -> list[str]:
         return []
     longest = max(float(np.max(s)) for s in steps)
     return [
-        f"{gaps} gaps in the sample times (median step {1e3 * median:.3g} ms, longest "
-        f"{1e3 * longest:.3g} ms): simulated over the recorded times"
+        f"{gaps} gap{'s' if gaps > 1 else ''} in the sample times (median step "
+        f"{1e3 * median:.3g} ms, longest {1e3 * longest:.3g} ms): simulated over the recorded "
+        "times"
     ]
 
 
@@ -208,7 +209,9 @@ class TorqueDrivenProblem:
         has variance 12 sigma^2 / (n (n^2 - 1) dt^2): the smoothed derivative's 10 ms, or the
         whole window when the velocity is fitted, with the start's own noise)."""
         w = self.w_fit
-        q_noise = position_noise(w.q)
+        # windows in which the position never changes (an arm at rest, a coarse encoder) show
+        # no noise: then the held-out windows', and at least the encoder's step
+        q_noise = position_noise(w.q) or position_noise(self.w_held.q) or self._encoder_step()
         n = w.q.shape[1] if self.fit_initial_velocity else max(5, round(0.01 / w.dt) | 1)
         v_noise = q_noise * math.sqrt(12 / (n * (n * n - 1))) / w.dt
         span = w.q.shape[1] * w.dt
@@ -217,6 +220,13 @@ class TorqueDrivenProblem:
         # and the window's start, a noisy sample itself: with the velocity fitted (a slope
         # through the start) a constant start error leaves half its size, sqrt(1 - 3/4)
         return math.hypot(q_noise, q_noise / 2, v_noise * span / math.sqrt(3))
+
+    def _encoder_step(self) -> float:
+        """The smallest position change anywhere in the trials, as quantization noise
+        (step / sqrt(12)); 0 for trials in which nothing moves."""
+        steps = [np.abs(np.diff(t.q)) for t in (*self.fit_trials, *self.held_trials)]
+        moved = np.concatenate([d[d > 0] for d in steps]) if steps else np.empty(0)
+        return float(moved.min()) / math.sqrt(12) if moved.size else 0.0
 
     def residual_peak_hz(self, effects: Sequence[Effect], params: Sequence[FloatArray]) -> float:
         """Frequency [Hz] where the held-out torque residual (inverse dynamics with the found
