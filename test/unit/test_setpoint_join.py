@@ -70,9 +70,21 @@ def test_a_lost_setpoint_is_released_as_missing_when_a_later_one_comes() -> None
     ready = join.setpoint(3 * MS, ["a"], [0.5], [0.0], at(3))  # a later one: 2's is lost
     ready += join.sample(state(3), at(3))
     assert stamps(ready) == [2, 3]
-    assert ready[0].missing and ready[0].setpoints is None
+    assert ready[0].missing and ready[0].setpoints == {"a": (0.5, 0.0)}  # the nearest, 1's
     assert ready[1].setpoints == {"a": (0.5, 0.0)}
     assert (join.matched, join.missing) == (2, 1)
+
+
+def test_samples_from_before_the_setpoint_stream_was_heard_take_its_first() -> None:
+    """At start-up the state stream may be matched before the setpoint stream: the samples
+    before the first setpoint heard take it, not a stale (or no) command."""
+    join = SetpointJoin()
+    assert join.sample(state(1), at(1)) == [] and join.sample(state(2), at(2)) == []
+    ready = join.setpoint(3 * MS, ["a"], [0.7], [0.0], at(3)) + join.sample(state(3), at(3))
+    assert stamps(ready) == [1, 2, 3]
+    assert all(p.setpoints == {"a": (0.7, 0.0)} and not p.missing for p in ready)
+    assert (join.before_first, join.missing, join.matched) == (2, 0, 1)
+    assert join.take_news() == ([], [])
 
 
 def test_a_lost_setpoint_is_released_after_the_wait() -> None:

@@ -13,8 +13,10 @@ first in, first out:
 
 * **matched**: the setpoint of the sample's stamp is there (before or after the sample);
 * **missing**: a joint that gets setpoints, but the sample's never came: a later setpoint of its
-  joints arrived, or the sample waited ``max_wait_s``. The estimator then falls back on
-  /joint_commands for that sample and reports it (a loss the user must see);
+  joints arrived, or the sample waited ``max_wait_s``. The setpoint of the nearest stamp stands
+  in (the driver holds its setpoint between commands), and the estimator reports the loss;
+* **before the first**: samples sent before this node heard the setpoint stream (it is matched
+  after the state stream at start-up): the first setpoint heard stands in;
 * **unpaired**: joints whose source publishes no setpoints (another driver, a bag without them,
   a driver with ``publish_setpoints:=false``). Found out once: the first samples of a joint never
   seen with a setpoint wait ``first_wait_s`` (the setpoint publisher may be matched after the
@@ -66,6 +68,7 @@ class SetpointJoin:
     matched: int = 0
     missing: int = 0
     unpaired_samples: int = 0
+    before_first: int = 0  # samples older than the first setpoint heard (the first one's used)
     unpaired: set[str] = field(default_factory=set)  # joints whose source sends no setpoints
     stopped: list[str] = field(default_factory=list)  # joints whose setpoints stopped (to log)
     found_without: list[str] = field(default_factory=list)  # joints found unpaired (to log)
@@ -152,11 +155,15 @@ class SetpointJoin:
         return max(first, self.max_wait_s)
 
     def _without(self, head: StateSample) -> Paired:
-        """A sample released without its setpoint: lost on the way, or its joints get none.
-        A joint never matched gets none when no setpoint has named it at or after the
-        sample's stamp; one matched before, when none has for ``first_wait_s`` of stamps (its
-        setpoints stopped: reported once through :meth:`take_news`)."""
-        stopped_ns = round(self.first_wait_s * 1e9)
+        """A sample released without its setpoint: lost on the way, sent before this node
+        heard the stream, or its joints get none. The first two take the setpoint of the
+        nearest stamp (the driver holds a setpoint between commands: its neighbours are the
+        best guess; a stale /joint_commands is what this module exists to avoid).
+
+        A joint never matched gets none when no setpoint has named it at or after the sample's
+        stamp; one matched before, when none has for ``first_wait_s`` of stamps (its setpoints
+        stopped: reported once through :meth:`take_news`)."""
+        window_ns = round(self.first_wait_s * 1e9)
         for name in head.names:
             newest = self._newest.get(name)
             if name in self.unpaired:
@@ -164,14 +171,33 @@ class SetpointJoin:
             if name not in self._paired and (newest is None or newest < head.stamp_ns):
                 self.unpaired.add(name)
                 self.found_without.append(name)
-            elif name in self._paired and (newest is None or newest < head.stamp_ns - stopped_ns):
+            elif name in self._paired and (newest is None or newest < head.stamp_ns - window_ns):
                 self.unpaired.add(name)
                 self.stopped.append(name)
+        nearest = self._nearest(head, window_ns)
         if any(n in self._paired and n not in self.unpaired for n in head.names):
             self.missing += 1
-            return Paired(head, None, missing=True)
+            return Paired(head, nearest, missing=True)
+        if nearest is not None:  # before the first setpoint this node heard
+            self.before_first += 1
+            return Paired(head, nearest)
         self.unpaired_samples += 1
         return Paired(head, None)
+
+    def _nearest(self, head: StateSample, window_ns: int) -> Setpoints | None:
+        """The kept setpoints naming the sample's joints nearest its stamp, the latest before it
+        first, within ``window_ns``; None without."""
+        before: tuple[int, Setpoints] | None = None
+        after: tuple[int, Setpoints] | None = None
+        for stamp, values in self._kept.items():
+            if abs(stamp - head.stamp_ns) > window_ns or not any(n in values for n in head.names):
+                continue
+            if stamp <= head.stamp_ns and (before is None or stamp > before[0]):
+                before = (stamp, values)
+            elif stamp > head.stamp_ns and (after is None or stamp < after[0]):
+                after = (stamp, values)
+        chosen = before or after
+        return chosen[1] if chosen else None
 
     def _forget(self) -> None:
         """Drop setpoints a second (of stamps) older than anything released: their samples
@@ -189,4 +215,4 @@ class SetpointJoin:
 
     def reset(self) -> None:
         """Forget the counts (the estimator's ~/reset); what is held back stays held."""
-        self.matched = self.missing = self.unpaired_samples = 0
+        self.matched = self.missing = self.unpaired_samples = self.before_first = 0

@@ -427,8 +427,8 @@ class ContactEstimatorNode(Node):
         self._missing_seen += missing
         if missing:
             problems.append(
-                f"{missing} samples without their /joint_setpoints: theta_d taken from "
-                "/joint_commands (setpoints lost, or setpoint_wait_s too short)"
+                f"{missing} samples without their /joint_setpoints: the nearest setpoint stood "
+                "in (setpoints lost, or setpoint_wait_s too short)"
             )
         if isinstance(self.pipeline, AwaitingModel):
             problems.insert(0, "waiting for a URDF on /robot_description")
@@ -473,6 +473,7 @@ class ContactEstimatorNode(Node):
         }
         if join is not None:
             values.update(setpoints_matched=join.matched, setpoints_missing=join.missing,
+                          setpoints_before_first=join.before_first,
                           samples_without_setpoints=join.unpaired_samples)  # fmt: skip
         gap, joint = max(((g, j) for j, g in pipeline.theta_d_gap.items()), default=(0.0, ""))
         values["theta_d_gap_max_rad"] = f"{gap:.4g}"

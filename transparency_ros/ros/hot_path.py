@@ -185,6 +185,8 @@ class HotPath:
         try:
             handler(data)
         except Exception:  # noqa: BLE001 - a bad message must not end the thread
+            if self._stopping.is_set() or not self.node.context.ok():
+                return  # a signal shut the context down under the handler: it is stopping
             self.handler_errors += 1
             now = time.monotonic()
             if now - self._last_error_log >= 1.0:

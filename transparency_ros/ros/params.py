@@ -18,8 +18,10 @@ import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.utilities import ok as context_ok
 from rclpy.utilities import remove_ros_args, try_shutdown
 
 from transparency_ros.core.errors import ConfigError, TransparencyError
@@ -211,6 +213,11 @@ def run_node(
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except _rclpy.RCLError:
+        # a signal shuts the context down; the executor may be building its wait set just then
+        # ("the given context is not valid"): the same shutdown, not a failure
+        if context_ok():
+            raise
     except TransparencyError as err:
         print(f"{name}: error: {err}", file=sys.stderr)  # noqa: T201
         return 2
