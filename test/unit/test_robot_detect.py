@@ -320,3 +320,23 @@ def test_episodes_give_each_onset_its_release_and_signed_peak() -> None:
     assert first.peak_residual == -3.0
     assert second.onset_s == pytest.approx(t[25])
     assert (second.release_s, second.peak_residual) == (None, 1.5)
+
+
+def test_a_one_joint_robot_is_calibrated_and_detected_on(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The AK80-6 pendulum with its URDF: pinocchio gives a one-joint robot's regressor as a
+    vector, and calibrate stopped with numpy's AxisError."""
+    from transparency_ros.cli import main  # noqa: PLC0415
+
+    data = Path(__file__).resolve().parents[1] / "data" / "ak80_6_pendulum"
+    common = [str(data / "energy_shaping_data_measured.csv"), "--urdf",
+              str(data / "dfki_simple_pendulum.urdf"), "--columns",
+              "time=time,position=position,velocity=velocity,torque=torque"]  # fmt: skip
+    cal = str(tmp_path / "cal.yaml")
+    assert main(["calibrate", *common, "--out", cal]) == 0
+    out = capsys.readouterr().out
+    assert "calibrated Einfachpendel_1 (Joint_1) on 1 recording: " in out
+    assert "positive definite at 100% of the configurations" in out
+    assert main(["detect", *common, "--calibration", cal]) == 0
+    assert "energy_shaping_data_measured Joint_1: contact onsets at [s]" in capsys.readouterr().out

@@ -106,9 +106,11 @@ def calibrate(
     for rec in recordings:
         q, v, a, grid = _smoothed(rec)
         data = pm.createData()
-        y = np.array(
-            [pin.computeJointTorqueRegressor(pm, data, *x) for x in zip(q, v, a, strict=True)]
-        )
+        # (pinocchio gives a one-joint robot's (1, 10) regressor as a vector: reshaped)
+        y = np.array([
+            np.reshape(pin.computeJointTorqueRegressor(pm, data, *x), (n, -1))
+            for x in zip(q, v, a, strict=True)
+        ])  # fmt: skip
         eye = np.eye(n)
         extra = np.concatenate(
             [

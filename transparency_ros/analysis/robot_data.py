@@ -146,8 +146,9 @@ def read_joint_csv(
             return None
         return per_joint(pattern)
 
+    numbered = "{}" in cols.position  # (a pattern without the number names one column)
     more = [cols.position.format(k) for k in range(len(joints) + 1, len(header) + 2)]
-    extra = [name for name in more if name in index]
+    extra = [name for name in more if name in index] if numbered else []
     if exact and extra:
         raise ConfigError(
             f"{p}: columns for {len(joints) + len(extra)} joints ({cols.position.format(1)} .. "

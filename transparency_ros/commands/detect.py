@@ -148,7 +148,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     cal = calibrate(model, recordings, args.gain, progress=lambda m: print(m, file=sys.stderr))
     cal.save(args.out)
     print(
-        f"calibrated {cal.robot} ({', '.join(cal.joints)}) on {len(recordings)} recordings: "
+        f"calibrated {cal.robot} ({', '.join(cal.joints)}) on {len(recordings)} "
+        f"recording{'s' if len(recordings) > 1 else ''}: "
         f"command delay {cal.command_delay_s * 1e3:.0f} ms, torque residual "
         f"{cal.torque_rms_nm:.3f} N m RMS, mass matrix positive definite at "
         f"{cal.mass_matrix_positive_share:.0%} of the configurations; written to {args.out}"
