@@ -178,17 +178,18 @@ def evaluate_trial(path: str | Path, fit_window_s: float = 0.015) -> TrialMetric
 def evaluate(
     paths: Sequence[str | Path],
     progress: Callable[[int, int, Path], None] = lambda *_: None,
-    skipped: Callable[[IncompleteTrialError], None] | None = None,
+    skipped: Callable[[BagReadError], None] | None = None,
 ) -> list[TrialMetrics]:
-    """Every trial under ``paths``; interrupted trials are passed to ``skipped`` (raised when
-    it is None, so they are never dropped silently)."""
+    """Every trial under ``paths``; a bag that cannot be evaluated (interrupted, damaged,
+    not a drop test) is passed to ``skipped`` and the rest evaluated (raised when ``skipped``
+    is None, so none is ever dropped silently)."""
     bags = find_bags(paths)
     results = []
     for i, bag in enumerate(bags, 1):
         progress(i, len(bags), bag)
         try:
             results.append(evaluate_trial(bag))
-        except IncompleteTrialError as err:
+        except BagReadError as err:
             if skipped is None:
                 raise
             skipped(err)

@@ -77,8 +77,7 @@ def plot_fig2(
     from matplotlib.figure import Figure  # noqa: PLC0415
     from matplotlib.ticker import FuncFormatter  # noqa: PLC0415
 
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    out = Path(path)  # (its directory is the caller's to make: a typo is not created)
     fig = Figure(figsize=(11, 4.6), layout="constrained")
     FigureCanvasAgg(fig)
     ax_t, ax_e = fig.subplots(1, 2)

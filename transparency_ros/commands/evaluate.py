@@ -8,6 +8,7 @@ from typing import Any
 
 from transparency_ros.analysis.drop_eval import evaluate, summarise
 from transparency_ros.bag.errors import BagReadError
+from transparency_ros.commands.outputs import output_file
 from transparency_ros.core import strict_json
 
 
@@ -33,14 +34,25 @@ def _f(value: float | None, scale: float = 1.0, spec: str = ".3g") -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.plot:
+        output_file(args.plot, "--plot")
+    terminal = sys.stderr.isatty()
+    skips: list[str] = []
+
     def progress(i: int, n: int, bag: Any) -> None:
-        if n > 1:
+        if n > 1 and terminal:  # one line, rewritten
             print(f"\r[{i}/{n}] {bag}", end="" if i < n else "\n", file=sys.stderr, flush=True)
+        elif n > 1:  # a pipe or a log: a line per bag
+            print(f"[{i}/{n}] {bag}", file=sys.stderr, flush=True)
 
     def skipped(err: Exception) -> None:
-        print(f"skipped {err}", file=sys.stderr)
+        skips.append(str(err))
+        prefix = "\n" if terminal else ""  # (below the progress line)
+        print(f"{prefix}skipped: {err}", file=sys.stderr, flush=True)
 
     results = evaluate(args.bags, progress, skipped)
+    if skips:
+        print(f"{len(skips)} bag(s) skipped, {len(results)} evaluated", file=sys.stderr)
     if not results:
         raise BagReadError(f"no complete trial in {', '.join(args.bags)}")
     summary = summarise(results)
@@ -57,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.json:
         strict_json.dump({"trials": [r.as_dict() for r in results],
-                          "summary": [s.__dict__ for s in summary]}, sys.stdout)  # fmt: skip
+                          "summary": [s.__dict__ for s in summary], "skipped": skips},
+                         sys.stdout)  # fmt: skip
         return 0
     print(f"{'actuator':<8} {'h [m]':>6} {'T [J]':>7} {'t_r [ms]':>9} {'v_s,e [m/s]':>11} "
           f"{'ΔE [J]':>8} {'F_mu [N]':>9} {'F_est [N]':>9}  t_e from")  # fmt: skip

@@ -8,6 +8,7 @@ import sys
 from typing import Any
 
 from transparency_ros.analysis.fig2 import ModelCurve, model_curves, plot_fig2
+from transparency_ros.commands.outputs import output_file
 from transparency_ros.core import strict_json
 from transparency_ros.core.config import load_actuators, load_drop_test
 from transparency_ros.core.contact_model import ContactModel
@@ -218,6 +219,8 @@ def _run_curves(models: list[ContactModel], args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     if args.plot and not args.curves:
         raise ModelError("--plot needs --curves")
+    if args.plot:
+        output_file(args.plot, "--plot")
     models = _models(args)
     if args.curves:
         return _run_curves(models, args)
