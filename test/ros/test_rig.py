@@ -120,3 +120,20 @@ def test_an_unwritable_output_directory_is_refused_before_any_trial(tmp_path: Pa
     assert done.returncode == 2
     assert "error: cannot create bag directory" in done.stderr and str(blocker) in done.stderr
     assert "[1/" not in done.stderr  # no trial was started
+
+
+def test_an_existing_trial_bag_is_refused_before_any_node_starts(tmp_path: Path) -> None:
+    """The second actuator's bag is there already: refused before the first actuator's
+    nodes start (it used to be found after the nodes had started, or after a whole campaign)."""
+    (tmp_path / "bags" / "EC60" / "h0200.0mm_t01").mkdir(parents=True)
+    done = subprocess.run(
+        [str(Path(sys.executable).parent / "transparency"), "rig", "--actuator", "U10DD", "EC60",
+         "--heights", "0.2", "--out", str(tmp_path / "bags")],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        f"transparency rig: error: --out {tmp_path / 'bags'}: 1 trial bag(s) of EC60 exist "
+        "already (h0200.0mm_t01): choose another --out or remove them"
+    ]
+    assert not (tmp_path / "bags" / "U10DD").exists()  # nothing started, nothing written

@@ -51,9 +51,21 @@ def run(args: argparse.Namespace) -> int:
     heights = parse_heights(args.heights)
     if args.trials < 1:
         raise ConfigError("--trials must be >= 1")
-    from transparency_ros.ros.rig_run import TrialBag, run_rig  # noqa: PLC0415 - needs rclpy
+    from transparency_ros.ros.rig_run import (  # noqa: PLC0415 - needs rclpy
+        TrialBag,
+        existing_trials,
+        run_rig,
+    )
 
     out = Path(args.out)
+    for actuator in args.actuator:  # every actuator's, before the first node starts
+        taken = existing_trials(out, actuator, heights, args.trials)
+        if taken:
+            raise ConfigError(
+                f"--out {out}: {len(taken)} trial bag(s) of {actuator} exist already "
+                f"({', '.join(taken[:3])}{', ...' if len(taken) > 3 else ''}): choose another "
+                "--out or remove them"
+            )
     total = len(args.actuator) * len(heights) * args.trials
     done = [0]
 

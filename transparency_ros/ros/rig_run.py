@@ -93,6 +93,17 @@ def _daq_messages(blocks: list[Float64MultiArray]) -> list[tuple[str, int, Any]]
     return out
 
 
+def trial_name(height_m: float, trial: int) -> str:
+    return f"h{height_m * 1000:06.1f}mm_t{trial:02d}"
+
+
+def existing_trials(out_dir: Path, actuator: str, heights_m: Sequence[float], trials: int
+                    ) -> list[str]:  # fmt: skip
+    """The trial bags of this run that are there already."""
+    names = [trial_name(h, t) for h in heights_m for t in range(1, trials + 1)]
+    return [n for n in names if (out_dir / actuator / n).exists()]
+
+
 def run_rig(
     actuator: str,
     heights_m: Sequence[float],
@@ -113,6 +124,12 @@ def run_rig(
         if not (0.0 < h <= 2.0):
             raise RigRunError(f"drop height {h} m out of range (the paper: {low}-{high} m)")
     bag_dir = out_dir / actuator
+    taken = existing_trials(out_dir, actuator, heights_m, trials_per_height)
+    if taken:  # before any node starts: a trial bag is never overwritten
+        raise RigRunError(
+            f"{len(taken)} trial bag(s) exist already in {bag_dir} ({', '.join(taken[:3])}"
+            f"{', ...' if len(taken) > 3 else ''}): choose another --out or remove them"
+        )
     check_writable(bag_dir)
     domain = pick_domain_id()
     k_s, threshold = drop.k_s_nm_per_rad, drop.threshold_rad
@@ -135,7 +152,7 @@ def run_rig(
             mass = drop.shuttle_mass_for(actuator)
             for h in heights_m:
                 for trial in range(1, trials_per_height + 1):
-                    name = f"h{h * 1000:06.1f}mm_t{trial:02d}"
+                    name = trial_name(h, trial)
                     progress(f"{actuator} {name}")
                     _set_height(call, h)
                     call(Trigger, "/actuator_driver/sim/lift", Trigger.Request())
