@@ -49,3 +49,15 @@ def test_a_plot_in_a_directory_that_does_not_exist_is_refused_before_any_work(
     assert err == [f"transparency {args[0]}: error: --plot {target}: directory "
                    f"{target.parent} does not exist"]  # fmt: skip
     assert not target.parent.exists()
+
+
+def test_messages_show_numbers_as_typed(capsys: pytest.CaptureFixture[str]) -> None:
+    """Not "np.float64(-1.0)", "1 replies" or "median nan ms"."""
+    from transparency_ros.commands.evaluate import _f  # noqa: PLC0415
+    from transparency_ros.ros.actuator_driver.diagnostics import late_message  # noqa: PLC0415
+
+    assert main(["model", "--actuator", "U10DD", "--energy", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert "got -1.0" in err and "np.float64" not in err
+    assert (late_message(1, 1, 0.001) or "").startswith("1 of 1 reply late")
+    assert _f(float("nan"), 1e3) == "-" and _f(None) == "-" and _f(0.5) == "0.5"

@@ -23,6 +23,7 @@ from typing import NamedTuple
 from transparency_ros.canbus import mit, moteus_fd, odrive
 from transparency_ros.canbus.errors import CanProtocolError, MalformedFrameError
 from transparency_ros.core.driver import ImpedanceCommand
+from transparency_ros.core.errors import shown
 
 TWO_PI = 2.0 * math.pi
 
@@ -54,7 +55,7 @@ class ActuatorProtocol(ABC):
 
     def __init__(self, gear_ratio: float = 1.0) -> None:
         if not (math.isfinite(gear_ratio) and gear_ratio > 0):
-            raise CanProtocolError(f"gear_ratio must be > 0, got {gear_ratio!r}")
+            raise CanProtocolError(f"gear_ratio must be > 0, got {shown(gear_ratio)}")
         self.gear_ratio = gear_ratio
         self.zero_offset_rad = 0.0  # host-side zero (protocols without a zero command)
 

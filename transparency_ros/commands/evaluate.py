@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from typing import Any
 
@@ -30,7 +31,8 @@ def register(subparsers: Any) -> None:
 
 
 def _f(value: float | None, scale: float = 1.0, spec: str = ".3g") -> str:
-    return "-" if value is None else format(value * scale, spec)
+    """A figure, or "-" where there is none (None, NaN)."""
+    return "-" if value is None or math.isnan(value) else format(value * scale, spec)
 
 
 def run(args: argparse.Namespace) -> int:

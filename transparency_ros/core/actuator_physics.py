@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from transparency_ros.core.config import ActuatorParams
-from transparency_ros.core.errors import ModelError
+from transparency_ros.core.errors import ModelError, shown
 
 # drive torque [N m] as a function of (measured position [rad], velocity [rad/s])
 DriveLaw = Callable[[float, float], float]
@@ -158,7 +158,7 @@ class ActuatorPhysics:
         initial_position_rad: float = 0.0,
     ) -> None:
         if not (math.isfinite(max_step_s) and max_step_s > 0):
-            raise ModelError(f"max_step_s must be > 0, got {max_step_s!r}")
+            raise ModelError(f"max_step_s must be > 0, got {shown(max_step_s)}")
         self.params = params
         self.environment: Environment = environment or FreeEnvironment()
         self.max_step_s = max_step_s

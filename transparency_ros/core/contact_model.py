@@ -48,7 +48,7 @@ from transparency_ros.core.config import (
     get_actuator,
     load_drop_test,
 )
-from transparency_ros.core.errors import ModelError
+from transparency_ros.core.errors import ModelError, shown
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -105,11 +105,11 @@ class ContactModel:
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
-                raise ModelError(f"ContactModel.{name} must be finite and > 0, got {value!r}")
+                raise ModelError(f"ContactModel.{name} must be finite and > 0, got {shown(value)}")
         for name in ("damping_nms_per_rad", "coulomb_friction_nm"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
-                raise ModelError(f"ContactModel.{name} must be finite and >= 0, got {value!r}")
+                raise ModelError(f"ContactModel.{name} must be finite and >= 0, got {shown(value)}")
 
     @classmethod
     def from_config(
@@ -319,7 +319,7 @@ def _as_energy(energy_j: npt.ArrayLike) -> FloatArray:
     bad = ~np.isfinite(energy) | (energy < 0.0)
     if np.any(bad):
         first = np.atleast_1d(energy)[np.atleast_1d(bad)][0]
-        raise ModelError(f"collision energy must be finite and >= 0 J, got {first!r}")
+        raise ModelError(f"collision energy must be finite and >= 0 J, got {shown(first)}")
     return energy
 
 

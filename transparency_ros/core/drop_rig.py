@@ -25,7 +25,7 @@ import random
 from dataclasses import dataclass, field
 
 from transparency_ros.core.contact_model import restitution_damping_ratio
-from transparency_ros.core.errors import ModelError
+from transparency_ros.core.errors import ModelError, shown
 
 GRAVITY = 9.81
 
@@ -52,7 +52,7 @@ class RigParams:
         }
         for name, value in positive.items():
             if not (math.isfinite(value) and value > 0):
-                raise ModelError(f"rig {name} must be > 0, got {value!r}")
+                raise ModelError(f"rig {name} must be > 0, got {shown(value)}")
         non_negative = {
             "arm_inertia_kgm2": self.arm_inertia_kgm2,
             "rail_friction_n": self.rail_friction_n,
@@ -61,7 +61,7 @@ class RigParams:
         }
         for name, value in non_negative.items():
             if not (math.isfinite(value) and value >= 0):
-                raise ModelError(f"rig {name} must be >= 0, got {value!r}")
+                raise ModelError(f"rig {name} must be >= 0, got {shown(value)}")
         if not 0.0 < self.restitution <= 1.0:
             raise ModelError(f"rig restitution must be in (0, 1], got {self.restitution!r}")
 
@@ -113,7 +113,7 @@ class DropRig:
     def hold(self, height_m: float) -> None:
         """Lift the shuttle off the arm and hold it with its face ``height_m`` above the tip."""
         if not (math.isfinite(height_m) and height_m > 0):
-            raise ModelError(f"drop height must be > 0 m, got {height_m!r}")
+            raise ModelError(f"drop height must be > 0 m, got {shown(height_m)}")
         self.state = ShuttleState(False, height_m)
         self.daq.clear()
         self._next_sample_s = None

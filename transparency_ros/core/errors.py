@@ -18,3 +18,12 @@ class UnknownActuatorError(ConfigError, LookupError):
 
 class ModelError(TransparencyError, ValueError):
     """Inputs to a physics model are outside its domain (negative energy, NaN, ...)."""
+
+
+def shown(value: object) -> str:
+    """A value in an error message as the user typed it: a numpy scalar as its number (``-1.0``,
+    not ``np.float64(-1.0)``), anything else as its repr."""
+    try:
+        return repr(float(value))  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return repr(value)

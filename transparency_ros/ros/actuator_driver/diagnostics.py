@@ -27,7 +27,8 @@ def late_message(late: int, replies: int, timeout_s: float) -> str | None:
     if replies <= 0 or late <= LATE_WARN_FRACTION * replies:
         return None
     return (
-        f"{late} of {replies} replies late this period: the device or bus answers slower than "
+        f"{late} of {replies} {'reply' if replies == 1 else 'replies'} late this period: the "
+        "device or bus answers slower than "
         f"reply_timeout_s {timeout_s * 1e3:g} ms (samples are published at their bus time)"
     )
 
