@@ -55,6 +55,8 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
             str(ws / "install"),
             "--event-handlers",
             "console_direct-",
+            "--packages-select",  # as the README and getting_started.md build it
+            "transparency_ros",
         ],
         cwd=ws,
         capture_output=True,

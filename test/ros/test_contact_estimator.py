@@ -424,7 +424,8 @@ def test_the_momentum_observer_method_finds_a_push_on_the_joint_it_acts_on(
     partial.header.stamp.sec = 1_800_000_003
     rig.states_pub.publish(partial)
     assert wait_for(lambda: len(rig.estimates) == len(stamps), timeout_s=10.0)
-    assert [c.header.frame_id for c in rig.contacts] == ["j1"]
+    # frame_id: the link j1 moves (a TF frame), from the URDF
+    assert [c.header.frame_id for c in rig.contacts] == ["l1"]
     onset_s = (stamp_ns_of(rig.contacts[0]) - base_ns) * 1e-9
     assert 1.0 < onset_s < 1.05
     during = rig.estimates[1200]

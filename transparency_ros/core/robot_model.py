@@ -120,6 +120,15 @@ class RobotModel:
                 out[i] = q[k]
         return out
 
+    def child_link(self, joint: str) -> str:
+        """The link ``joint`` moves (its child in the URDF; the TF frame a torque about the
+        joint is expressed in): the first body Pinocchio attaches to it."""
+        joint_id = self.pin_model.getJointId(joint)
+        for frame in self.pin_model.frames:
+            if frame.type == self._pin.FrameType.BODY and frame.parentJoint == joint_id:
+                return str(frame.name)
+        raise UrdfError(f"joint {joint!r} moves no link")
+
     def mass_matrix(self, q: FloatArray) -> FloatArray:
         m = self._pin.crba(self.pin_model, self._data, self.configuration(q))
         return np.asarray(np.triu(m) + np.triu(m, 1).T, dtype=float)  # crba fills the upper half

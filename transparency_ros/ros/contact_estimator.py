@@ -11,7 +11,8 @@ Publishes, with standard interfaces only:
 * /estimated_effort  sensor_msgs/JointState: effort = tau_hat, position = theta_d - theta_a,
   header.stamp = the source sample's stamp;
 * /contact           geometry_msgs/WrenchStamped, one per contact onset: stamp = the sample that
-  crossed the threshold, frame_id = joint, torque.z = tau_hat [N m], force.z = tau_hat /
+  crossed the threshold, frame_id = the link the joint moves when the URDF is known (else the
+  joint), torque.z = tau_hat [N m], force.z = tau_hat /
   arm_length_m [N] when arm_length_m > 0;
 * /collision         the same, one per collision-level onset (when that level is configured);
 * /contact_release   the same, one per release (stamp = first sample back below the release
@@ -135,6 +136,7 @@ class ContactEstimatorNode(Node):
             # samples waiting for setpoints while nothing arrives
             self.create_timer(max(wait_s / 2, 0.005), self._expire_waiting)
         self._missing_seen = 0  # setpoints missing at the last diagnostics
+        self._frames: dict[str, str] = {}  # joint -> the link it moves (observer: from the URDF)
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
         self._estimate_pub = self.create_publisher(JointState, "/estimated_effort", 100)
@@ -244,6 +246,7 @@ class ContactEstimatorNode(Node):
             pipeline.rejected.update(kept)
             replaced = isinstance(self.pipeline, ObserverPipeline)
             self.pipeline = pipeline
+            self._frames.clear()
             self._description = msg.data
         joints = ", ".join(pipeline.model.joint_names)
         self.get_logger().info(
@@ -368,6 +371,17 @@ class ContactEstimatorNode(Node):
                     f"/joint_setpoints stopped naming {joint}: theta_d from /joint_commands"
                 )
 
+    def _frame(self, joint: str) -> str:
+        """The frame_id of a joint's events: the link it moves when the URDF is known (a TF
+        frame), else the joint's name."""
+        pipeline = self.pipeline
+        if isinstance(pipeline, ObserverPipeline):
+            frame = self._frames.get(joint)
+            if frame is None:
+                frame = self._frames[joint] = pipeline.model.child_link(joint)
+            return frame
+        return joint
+
     def _publish_event(self, event: ContactEvent, stamp_ns: int) -> None:
         """Publish an event of the sample stamped ``stamp_ns`` (the sample that triggered it)."""
         pub = self._event_pubs.get(event.kind)
@@ -378,7 +392,7 @@ class ContactEstimatorNode(Node):
             data = encode_wrench_stamped(
                 sec,
                 nanosec,
-                event.joint,
+                self._frame(event.joint),
                 (0.0, 0.0, force),
                 (0.0, 0.0, event.torque_nm),
             )
