@@ -113,7 +113,22 @@ def blocks() -> dict[Path, dict[str, str]]:
             specs()
         )
     out.setdefault(ROOT / "docs" / "cli.md", {})["subcommands"] = subcommand_table()
+    out.setdefault(ROOT / "docs" / "feel_cage.md", {})["feelcage core"] = feelcage_core_table()
     return out
+
+
+def feelcage_core_table() -> str:
+    """What `transparency feelcage --engine core` prints (deterministic: the cores in one
+    process), so the page's table is the code's."""
+    import contextlib  # noqa: PLC0415
+    import io  # noqa: PLC0415
+
+    from transparency_ros.cli import main as cli  # noqa: PLC0415
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        cli(["feelcage", "--engine", "core"])
+    return "```\n" + out.getvalue().rstrip("\n") + "\n```\n"
 
 
 def files() -> dict[Path, str]:
