@@ -83,35 +83,46 @@ def _optional(text: str) -> float | None:
     return float(text) if text else None
 
 
-def run_cell(
-    actuator: str, ball: str, setup: FeelCageSetup, *, settle_s: float | None = None
-) -> CellRun:
-    """Run one Table 2 cell through the three node processes; see the module docstring."""
-    settle = setup.settle_s if settle_s is None else settle_s
+def node_parameters(actuator: str, ball: str, setup: FeelCageSetup) -> dict[str, dict[str, object]]:
+    """The three nodes' parameters for one cell (config/feel_cage_nodes.yaml is U10DD's with the
+    rubber ball, generated from this): the simulated actuator striking a ball it places on
+    request, an estimator whose threshold is out of reach until e_s is known, the behavior."""
     peak = get_actuator(actuator).peak_torque_nm
-    driver_params: dict[str, object] = {
-        "protocol": "moteus",
-        "sim_actuator": actuator, "sim_environment": "ball_on_rail", "sim_ball": ball,
-        "sim_place_ball": False, "sim_friction_ripple": setup.friction_ripple,
-        "k_s": setup.k_s_nm_per_rad, "k_d": 0.0, "publish_rate_hz": setup.sample_rate_hz,
-        "position_min_rad": -1000.0, "position_max_rad": 1000.0,
-        "velocity_limit_rad_s": 1000.0, "torque_limit_nm": peak, "command_timeout_s": 1.0,
+    return {
+        "actuator_driver": {
+            "protocol": "moteus",
+            "sim_actuator": actuator, "sim_environment": "ball_on_rail", "sim_ball": ball,
+            "sim_place_ball": False, "sim_friction_ripple": setup.friction_ripple,
+            "k_s": setup.k_s_nm_per_rad, "k_d": 0.0, "publish_rate_hz": setup.sample_rate_hz,
+            "position_min_rad": -1000.0, "position_max_rad": 1000.0,
+            "velocity_limit_rad_s": 1000.0, "torque_limit_nm": peak, "command_timeout_s": 1.0,
+        },
+        "contact_estimator": {
+            "k_s": setup.k_s_nm_per_rad, "contact_onset_rad": 9.9, "contact_release_rad": 9.8,
+        },
+        "feel_cage_behavior": {"actuator": actuator},
     }  # fmt: skip
+
+
+def run_cell(
+    actuator: str, ball: str, setup: FeelCageSetup, *, settle_s: float | None = None,
+    params_file: str | None = None,
+) -> CellRun:  # fmt: skip
+    """Run one Table 2 cell through the three node processes; see the module docstring.
+    ``params_file``: the nodes take their parameters from it (--params-file) instead, as a user
+    starts them by hand with config/feel_cage_nodes.yaml."""
+    settle = setup.settle_s if settle_s is None else settle_s
+    params = node_parameters(actuator, ball, setup)
     procs: dict[str, subprocess.Popen[str]] = {}
     logs: dict[str, str] = {}
     domain = pick_domain_id()
     try:
-        procs["actuator_driver"] = start_node("actuator_driver", driver_params, domain_id=domain)
-        procs["contact_estimator"] = start_node(
-            "contact_estimator",
-            {"k_s": setup.k_s_nm_per_rad, "contact_onset_rad": 9.9, "contact_release_rad": 9.8},
-            domain_id=domain,
-        )
-        procs["feel_cage_behavior"] = start_node(
-            "feel_cage_behavior",
-            {"actuator": actuator},
-            domain_id=domain,
-        )
+        for name, values in params.items():
+            if params_file:
+                extra = ["--params-file", params_file]
+                procs[name] = start_node(name, {}, extra=extra, domain_id=domain)
+            else:
+                procs[name] = start_node(name, values, domain_id=domain)
         with Listener("feelcage_runner") as node:
             return _trial(node, setup, settle, lambda: first_exited(procs))
     finally:
