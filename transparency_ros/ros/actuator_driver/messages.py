@@ -35,17 +35,20 @@ def setpoint_of(command: ImpedanceCommand | None) -> tuple[float, float, float]:
     return (command.position_rad if held else NAN), command.velocity_rad_s, command.torque_ff_nm
 
 
-def encode_states(stamp_s: float, names: Sequence[str], feedback: Sequence[Feedback]) -> bytes:
+def _encode(stamp_s: float, names: Sequence[str], columns: Sequence[list[float]]) -> bytes:
     sec, nanosec = stamps.split(stamps.from_seconds(stamp_s))
+    position, velocity, effort = columns
     return encode_joint_state(
-        sec,
-        nanosec,
-        "",
-        list(names),
-        position=[fb.position_rad for fb in feedback],
-        velocity=[fb.velocity_rad_s for fb in feedback],
-        effort=[fb.torque_nm for fb in feedback],
+        sec, nanosec, "", list(names), position=position, velocity=velocity, effort=effort
     )
+
+
+def encode_states(stamp_s: float, names: Sequence[str], feedback: Sequence[Feedback]) -> bytes:
+    return _encode(stamp_s, names, (
+        [fb.position_rad for fb in feedback],
+        [fb.velocity_rad_s for fb in feedback],
+        [fb.torque_nm for fb in feedback],
+    ))  # fmt: skip
 
 
 def encode_setpoints(
@@ -54,13 +57,5 @@ def encode_setpoints(
     """The /joint_setpoints message of a sample stamped ``stamp_s`` (the same float the
     /joint_states message was stamped from, so both carry the same stamp to the nanosecond)."""
     values = [setpoint_of(c) for c in commands]
-    sec, nanosec = stamps.split(stamps.from_seconds(stamp_s))
-    return encode_joint_state(
-        sec,
-        nanosec,
-        "",
-        list(names),
-        position=[v[0] for v in values],
-        velocity=[v[1] for v in values],
-        effort=[v[2] for v in values],
-    )
+    return _encode(stamp_s, names, ([v[0] for v in values], [v[1] for v in values],
+                                    [v[2] for v in values]))  # fmt: skip
