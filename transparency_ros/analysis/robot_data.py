@@ -107,6 +107,20 @@ def read_text(path: Path) -> str:
     return raw.decode("utf-8", errors="replace")
 
 
+def check_time(path: Path, name: str, t: FloatArray, *, repeats: bool = False) -> None:
+    """A time column that goes backwards (or, unless ``repeats``, repeats a value) is refused,
+    naming the first such row of the file (the header is row 1)."""
+    steps = np.diff(t)
+    bad = np.flatnonzero(steps < 0 if repeats else steps <= 0)
+    if bad.size:
+        k = int(bad[0])
+        how = "repeats" if steps[k] == 0 else "goes backwards"
+        raise ConfigError(
+            f"{path}: time column {name!r} {how} at row {k + 3}: {t[k + 1]:g} after {t[k]:g} "
+            f"({bad.size} such row{'s' if bad.size > 1 else ''})"
+        )
+
+
 def read_joint_csv(
     path: str | Path, joints: Sequence[str], columns: Columns | None = None, *, exact: bool = False
 ) -> JointRecording:
@@ -146,23 +160,18 @@ def read_joint_csv(
             return None
         return per_joint(pattern)
 
-    numbered = "{}" in cols.position  # (a pattern without the number names one column)
-    more = [cols.position.format(k) for k in range(len(joints) + 1, len(header) + 2)]
-    extra = [name for name in more if name in index] if numbered else []
-    if exact and extra:
+    # (a pattern without the number names one column: nothing more to find)
+    more = range(len(joints) + 1, len(header) + 2) if exact and "{}" in cols.position else ()
+    extra = [name for k in more if (name := cols.position.format(k)) in index]
+    if extra:
         raise ConfigError(
             f"{p}: columns for {len(joints) + len(extra)} joints ({cols.position.format(1)} .. "
             f"{extra[-1]}), the URDF has {len(joints)} ({', '.join(joints)}): another robot's "
             "URDF? (--joints names the ones to use)"
         )
     t = column(cols.time)
-    back = np.flatnonzero(np.diff(t) < 0)
-    if back.size:  # a repeated stamp is a logger's habit (dropped below); going back is not
-        k = int(back[0])
-        raise ConfigError(
-            f"{p}: time column {cols.time!r} goes backwards at row {k + 3}: {t[k + 1]:g} after "
-            f"{t[k]:g}"
-        )
+    # a repeated stamp is a logger's habit (dropped below); going back is not
+    check_time(p, cols.time, t, repeats=True)
     stamps = np.round((t - t[0]) * 1e9).astype(np.int64)
     keep = np.r_[True, np.diff(stamps) > 0]
     notes = []

@@ -192,30 +192,26 @@ def run_detect(args: argparse.Namespace) -> int:
 
         for det, rec in zip(detections, recordings, strict=True):
             print(f"wrote {plot_detection(Path(args.report), det, rec)}")
-    scores = chance = None
-    if args.labels:  # without labels there is nothing to score: onsets are not false alarms
-        scores = {
-            joint: rd.score(detections, recordings, joint=j)
-            for j, joint in enumerate(model.joint_names)
-        }
-        chance = {
-            joint: rd.by_chance(detections, recordings, joint=j).recall
-            for j, joint in enumerate(model.joint_names)
-        }
+    # joint -> (score, recall by chance); without labels there is nothing to score: onsets
+    # are not false alarms
+    scores = {
+        joint: (rd.score(detections, recordings, joint=j),
+                rd.by_chance(detections, recordings, joint=j).recall)
+        for j, joint in enumerate(model.joint_names)
+    } if args.labels else {}  # fmt: skip
     if args.json:
-        strict_json.dump(_report(args, detections, recordings, scores, chance), sys.stdout)
+        strict_json.dump(_report(args, detections, recordings, scores), sys.stdout)
         return 0
     for det in detections:
         for joint, onsets in zip(det.joints, det.onsets_s, strict=True):
             times = ", ".join(f"{t:.3f}" for t in onsets) or "none"
             print(f"{det.recording} {joint}: contact onsets at [s] {times}")
-    for joint, s in (scores or {}).items():
-        assert chance is not None
+    for joint, (s, chance) in scores.items():
         print(
             f"{joint}: {s.found}/{s.pulses} pulses found, {s.false_alarms} false alarms "
             f"({s.alarms_per_minute:.1f} per minute), delay median "
             f"{_ms(s.delay_s(50))}, p90 {_ms(s.delay_s(90))}; "
-            f"{chance[joint]:.0%} of the pulses would be found by chance (the same onsets "
+            f"{chance:.0%} of the pulses would be found by chance (the same onsets "
             "against the labels moved in time)"
         )
     return 0
@@ -229,8 +225,7 @@ def _report(
     args: argparse.Namespace,
     detections: list[Any],
     recordings: list[Any],
-    scores: dict[str, Any] | None,
-    chance: dict[str, float] | None,
+    scores: dict[str, tuple[Any, float]],
 ) -> dict[str, Any]:
     """``detect --json``: per recording and joint the contacts (onset and release stamps [s],
     the peak residual); with labels, per joint the scores, the missed pulses as data."""
@@ -247,9 +242,9 @@ def _report(
         "method": args.method,
         "residual_unit": "rad" if args.method == "position_error" else "N m",
         "recordings": per_recording,
-        "scores": None if scores is None or chance is None else {
-            j: {**_as_dict(s), "recall_by_chance": chance[j]} for j, s in scores.items()
-        },
+        "scores": {
+            j: {**_as_dict(s), "recall_by_chance": chance} for j, (s, chance) in scores.items()
+        } if args.labels else None,
     }  # fmt: skip
 
 

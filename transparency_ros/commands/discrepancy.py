@@ -122,6 +122,8 @@ def run_import(args: argparse.Namespace) -> int:
 def _single_joint_csv(path: Path, text: str, names: list[str]) -> list[Any]:
     """The time, position, velocity and torque columns of a one-joint CSV, checked: at least
     two data rows, finite numbers, time increasing."""
+    from transparency_ros.analysis.robot_data import check_time  # noqa: PLC0415
+
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise ConfigError(f"{path}: empty file (no header)")
@@ -141,21 +143,8 @@ def _single_joint_csv(path: Path, text: str, names: list[str]) -> list[Any]:
     cols = [data[:, header.index(n)] for n in names]
     if not all(np.isfinite(c).all() for c in cols):
         raise ConfigError(f"{path}: NaN or inf in the data")
-    check_increasing(path, names[0], cols[0])
+    check_time(path, names[0], cols[0])
     return cols
-
-
-def check_increasing(path: Path, name: str, t: Any) -> None:
-    """A time column that does not increase row by row is refused, naming the first row."""
-    steps = np.diff(t)
-    bad = np.flatnonzero(steps <= 0)
-    if bad.size:
-        k = int(bad[0])
-        how = "repeats" if steps[k] == 0 else "goes backwards"
-        raise ConfigError(
-            f"{path}: time column {name!r} {how} at row {k + 3}: {t[k + 1]:g} after {t[k]:g} "
-            f"({bad.size} such row{'s' if bad.size > 1 else ''})"
-        )
 
 
 def bag_name(path: Path) -> str:

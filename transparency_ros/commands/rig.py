@@ -61,11 +61,7 @@ def run(args: argparse.Namespace) -> int:
     for actuator in args.actuator:  # every actuator's, before the first node starts
         taken = existing_trials(out, actuator, heights, args.trials)
         if taken:
-            raise ConfigError(
-                f"--out {out}: {len(taken)} trial bag(s) of {actuator} exist already "
-                f"({', '.join(taken[:3])}{', ...' if len(taken) > 3 else ''}): choose another "
-                "--out or remove them"
-            )
+            raise ConfigError(f"--out {out}: {taken}")
     total = len(args.actuator) * len(heights) * args.trials
     done = [0]
 

@@ -101,7 +101,11 @@ class SetpointJoin:
         for name, (theta_d, theta_d_dot) in values.items():
             if math.isinf(theta_d) or (not math.isnan(theta_d) and not math.isfinite(theta_d_dot)):
                 raise ValueError(f"{name}: setpoint {theta_d}, {theta_d_dot} rad/s")
-        self._kept[stamp_ns] = {**self._kept.get(stamp_ns, {}), **values}
+        kept = self._kept.get(stamp_ns)
+        if kept is None:
+            self._kept[stamp_ns] = values
+        else:  # another driver's of the same stamp
+            kept.update(values)
         while len(self._kept) > self.max_kept:
             self._kept.popitem(last=False)
         for name in names:

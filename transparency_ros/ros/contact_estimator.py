@@ -323,13 +323,29 @@ class ContactEstimatorNode(Node):
             self._estimate(ready)
 
     def _expire_waiting(self) -> None:
+        """On the executor, not the hot path: release samples that waited while nothing
+        arrived, and say what the join found out (logging is I/O)."""
         join = self.join
-        if join is not None and join.waiting:
+        if join is None:
+            return
+        if join.waiting:
             # a setpoint publisher in the graph, none heard yet: it is being matched
             expected = not join.active and self.count_publishers("/joint_setpoints") > 0
             with self.lock:
                 join.expected = expected
                 self._estimate(join.expire(time.monotonic()))
+        if join.found_without or join.stopped:
+            with self.lock:
+                without, stopped = join.take_news()
+            if without:
+                self.get_logger().info(
+                    f"no /joint_setpoints for {', '.join(without)} (a source without them): "
+                    "theta_d from /joint_commands"
+                )
+            for joint in stopped:
+                self.get_logger().warning(
+                    f"/joint_setpoints stopped naming {joint}: theta_d from /joint_commands"
+                )
 
     def _estimate(self, ready: list[Paired]) -> None:
         """Estimate and publish samples in order; called with ``self.lock`` held."""
@@ -359,17 +375,6 @@ class ContactEstimatorNode(Node):
             # the age at the publish call, as the source's stamp is (delivery is after both)
             self.sample_age.add((time.time_ns() - state.stamp_ns) * 1e-9)
             self._estimate_pub.publish(out)
-        if self.join is not None:
-            without, stopped = self.join.take_news()
-            if without:
-                self.get_logger().info(
-                    f"no /joint_setpoints for {', '.join(without)} (a source without them): "
-                    "theta_d from /joint_commands"
-                )
-            for joint in stopped:
-                self.get_logger().warning(
-                    f"/joint_setpoints stopped naming {joint}: theta_d from /joint_commands"
-                )
 
     def _frame(self, joint: str) -> str:
         """The frame_id of a joint's events: the link it moves when the URDF is known (a TF

@@ -98,10 +98,17 @@ def trial_name(height_m: float, trial: int) -> str:
 
 
 def existing_trials(out_dir: Path, actuator: str, heights_m: Sequence[float], trials: int
-                    ) -> list[str]:  # fmt: skip
-    """The trial bags of this run that are there already."""
+                    ) -> str | None:  # fmt: skip
+    """What is wrong when trial bags of this run are there already (never overwritten), else
+    None; checked before any node starts."""
     names = [trial_name(h, t) for h in heights_m for t in range(1, trials + 1)]
-    return [n for n in names if (out_dir / actuator / n).exists()]
+    taken = [n for n in names if (out_dir / actuator / n).exists()]
+    if not taken:
+        return None
+    return (
+        f"{len(taken)} trial bag(s) of {actuator} exist already ({', '.join(taken[:3])}"
+        f"{', ...' if len(taken) > 3 else ''}): choose another --out or remove them"
+    )
 
 
 def run_rig(
@@ -125,11 +132,8 @@ def run_rig(
             raise RigRunError(f"drop height {h} m out of range (the paper: {low}-{high} m)")
     bag_dir = out_dir / actuator
     taken = existing_trials(out_dir, actuator, heights_m, trials_per_height)
-    if taken:  # before any node starts: a trial bag is never overwritten
-        raise RigRunError(
-            f"{len(taken)} trial bag(s) exist already in {bag_dir} ({', '.join(taken[:3])}"
-            f"{', ...' if len(taken) > 3 else ''}): choose another --out or remove them"
-        )
+    if taken:
+        raise RigRunError(f"{out_dir}: {taken}")
     check_writable(bag_dir)
     domain = pick_domain_id()
     k_s, threshold = drop.k_s_nm_per_rad, drop.threshold_rad

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import replace
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -209,9 +210,7 @@ class TorqueDrivenProblem:
         has variance 12 sigma^2 / (n (n^2 - 1) dt^2): the smoothed derivative's 10 ms, or the
         whole window when the velocity is fitted, with the start's own noise)."""
         w = self.w_fit
-        # windows in which the position never changes (an arm at rest, a coarse encoder) show
-        # no noise: then the held-out windows', and at least the encoder's step
-        q_noise = position_noise(w.q) or position_noise(self.w_held.q) or self._encoder_step()
+        q_noise = self._position_noise
         n = w.q.shape[1] if self.fit_initial_velocity else max(5, round(0.01 / w.dt) | 1)
         v_noise = q_noise * math.sqrt(12 / (n * (n * n - 1))) / w.dt
         span = w.q.shape[1] * w.dt
@@ -220,6 +219,13 @@ class TorqueDrivenProblem:
         # and the window's start, a noisy sample itself: with the velocity fitted (a slope
         # through the start) a constant start error leaves half its size, sqrt(1 - 3/4)
         return math.hypot(q_noise, q_noise / 2, v_noise * span / math.sqrt(3))
+
+    @cached_property
+    def _position_noise(self) -> float:
+        """The fitted windows' position noise (made once: the search asks at every step).
+        Windows in which the position never changes (an arm at rest, a coarse encoder) show
+        none: then the held-out windows', and at least the encoder's step."""
+        return position_noise(self.w_fit.q) or position_noise(self.w_held.q) or self._encoder_step()
 
     def _encoder_step(self) -> float:
         """The smallest position change anywhere in the trials, as quantization noise
