@@ -1,0 +1,199 @@
+"""The discrepancy tool, blind, on drop-test campaigns of a plant written outside this project.
+
+    .venv/bin/python benchmarks/zoo_survey.py --seeds 1000-1099 [--jobs 2] [--plant PATH]
+        [--zoo DIR] [--out DIR]
+
+The plant is ``../shared/plants/drop_zoo.py`` (randomized rigs: friction and contact laws,
+encoders, noise, recording windows, conventions, 0-2 hidden effects per campaign, the truth in
+its ``answers.yaml``: ``required``, ``allowed``, ``params``). Nothing of it is imported by the
+package; this script only runs it (a subprocess) and reads its answers after the tool has
+spoken. Scores, per campaign: fully right (every required effect named, nothing outside
+required + allowed); per effect, a confusion row (named right / named as something else /
+missed); the named parameters against the truth (relative error, whether the stated 95 %
+interval covers it); false findings on campaigns with nothing hidden; run time. Writes
+results/zoo_survey.md (+ .json, and the confusion matrix as zoo_confusion.png for
+docs/discrepancy.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from multiprocessing import Pool
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+REPO = Path(__file__).resolve().parents[1]
+PLANT = REPO.parent / "shared" / "plants" / "drop_zoo.py"
+
+# The truth's parameter keys, and the tool's finding parameter each is compared with.
+PARAMS: dict[str, list[tuple[str, str]]] = {
+    "backlash": [("backlash_rad", "backlash_rad")],
+    "sensor_delay": [("delay_s", "delay_s")],
+    "cogging": [("cogging_amplitude_nm", "amplitude_nm")],
+    "restitution": [("restitution_coefficient", "coefficient")],
+    "torque_saturation": [("saturation_nm", "limit_nm")],
+    "impact_speed_loss": [("rail_friction_n", "rail_friction_n")],
+    "structural_compliance": [("compliance_hz", "frequency_hz")],
+    "torque_offset": [("offset_nm", "offset_nm")],
+}
+
+
+def generate(plant: Path, zoo: Path, seeds: str, jobs: int) -> dict[str, Any]:
+    zoo.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tempfile.gettempdir()) / "drop_zoo_numba"))
+    subprocess.run(
+        [sys.executable, str(plant), str(zoo), "--seeds", seeds, "--jobs", str(jobs)],
+        check=True,
+        env=env,
+        stdout=subprocess.DEVNULL,
+    )
+    return dict(yaml.safe_load((zoo / "answers.yaml").read_text()))
+
+
+def analyse(campaign: Path) -> dict[str, Any]:
+    from transparency_ros.analysis.discrepancy.discover import Discoverer  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.drop import (  # noqa: PLC0415
+        DropProblem,
+        load_drop_nominal,
+        load_drop_trial,
+    )
+    from transparency_ros.bag.reader import find_bags  # noqa: PLC0415
+
+    started = time.perf_counter()
+    try:
+        trials = [load_drop_trial(b) for b in find_bags([str(campaign)])]
+        problem = DropProblem(trials, load_drop_nominal(None, trials))
+        report = Discoverer(problem).run()
+        found = {
+            f.effect: {
+                "parameters": {k: float(v) for k, v in f.parameters.items()},
+                "interval": {
+                    k: [float(a), float(b)] for k, (a, b) in (f.confidence_interval or {}).items()
+                },
+            }
+            for f in report.findings
+        }
+        unexplained, error = [str(u.get("where", {}).get("phase")) for u in report.unexplained], None
+    except Exception as err:  # noqa: BLE001 - a failure is a result here, with its reason
+        found, unexplained, error = {}, [], f"{type(err).__name__}: {err}"
+    return {
+        "campaign": campaign.name,
+        "found": found,
+        "unexplained": unexplained,
+        "error": error,
+        "seconds": time.perf_counter() - started,
+    }
+
+
+def judge(row: dict[str, Any], truth: dict[str, Any]) -> dict[str, Any]:
+    required, allowed = set(truth["required"]), set(truth["allowed"])
+    named = set(row["found"])
+    missed = sorted(required - named)
+    extra = sorted(named - required - allowed)
+    params = []
+    drift = truth["params"].get("drift_term")
+    if drift and "parameter_drift" in required & named:
+        key = {"J_r": "reflected_inertia_scale", "b_v": "viscous_scale", "tau_coul": "coulomb_scale"}
+        true = float(truth["params"]["drift_ratio"])
+        got = row["found"]["parameter_drift"]["parameters"].get(key[drift])
+        ci = row["found"]["parameter_drift"]["interval"].get(key[drift])
+        if got is not None:
+            params.append({
+                "effect": "parameter_drift", "key": f"{drift} ratio", "true": true, "got": got,
+                "rel_error": abs(got - true) / true,
+                "covered": None if ci is None else bool(ci[0] <= true <= ci[1]),
+            })  # fmt: skip
+    for effect in sorted(required & named):
+        for true_key, tool_key in PARAMS.get(effect, []):
+            true = truth["params"].get(true_key)
+            got = row["found"][effect]["parameters"].get(tool_key)
+            if true is None or got is None:
+                continue
+            ci = row["found"][effect]["interval"].get(tool_key)
+            params.append({
+                "effect": effect, "key": true_key, "true": float(true), "got": got,
+                "rel_error": abs(got - true) / abs(true),
+                "covered": None if ci is None else bool(ci[0] <= true <= ci[1]),
+            })  # fmt: skip
+    return {"right": not missed and not extra, "missed": missed, "extra": extra, "params": params}
+
+
+def main(argv: list[str] | None = None) -> int:
+    from _results import write_results  # noqa: PLC0415
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", default="1000-1099", help="as drop_zoo.py takes them: 1-5,9")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--plant", type=Path, default=PLANT)
+    parser.add_argument("--zoo", type=Path, help="keep the campaigns here (default: a temp dir)")
+    parser.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    args = parser.parse_args(argv)
+    if not args.plant.is_file():
+        parser.error(f"--plant {args.plant}: no such file (the shared drop_zoo.py)")
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        zoo = args.zoo or Path(tmp)
+        answers = generate(args.plant, zoo, args.seeds, args.jobs)
+        made = time.perf_counter() - started
+        campaigns = [zoo / name for name in answers]
+        rows = []
+        with Pool(args.jobs) as pool:
+            for row in pool.imap(analyse, campaigns):
+                truth = answers[row["campaign"]]
+                row["truth"], row["verdict"] = truth, judge(row, truth)
+                rows.append(row)
+                v = row["verdict"]
+                print(
+                    f"{row['campaign']}: required {truth['required']} -> {list(row['found'])}"
+                    f"{' unexplained ' + ','.join(row['unexplained']) if row['unexplained'] else ''}"
+                    f" {'RIGHT' if v['right'] else 'missed ' + str(v['missed']) + ' extra ' + str(v['extra'])}"
+                    f"{' ERROR ' + row['error'] if row['error'] else ''} ({row['seconds']:.1f} s)",
+                    file=sys.stderr,
+                    flush=True,
+                )
+    lines = summary(rows, args.seeds, args.jobs, time.perf_counter() - started, made)
+    write_results(args.out, "zoo_survey", lines, rows)
+    return 0
+
+
+def summary(rows: list[dict[str, Any]], seeds: str, jobs: int, total: float, made: float) -> list[str]:
+    n = len(rows)
+    right = sum(r["verdict"]["right"] for r in rows)
+    free = [r for r in rows if r["truth"]["required"] == ["payload_gravity"]]
+    free_ok = sum(not r["verdict"]["extra"] for r in free)
+    params = [p for r in rows for p in r["verdict"]["params"]]
+    within = sum(p["rel_error"] <= 0.3 for p in params)
+    with_ci = [p for p in params if p["covered"] is not None]
+    covered = sum(p["covered"] for p in with_ci)
+    times = [r["seconds"] for r in rows]
+    pct = lambda a, b: f"{a}/{b} ({100 * a / b:.0f} %)" if b else "-"  # noqa: E731
+    return [
+        f"Seeds {seeds}: {n} campaigns of ../shared/plants/drop_zoo.py, the tool blind",
+        "",
+        "| measure | this tool | goal |",
+        "|---|---|---|",
+        f"| campaigns fully right | {pct(right, n)} | ≥ 90 % |",
+        f"| effect-free campaigns naming nothing outside `allowed` | {pct(free_ok, len(free))} | ≥ 95 % |",
+        f"| named parameters within 30 % of the truth | {pct(within, len(params))} | ≥ 90 % |",
+        f"| 95 % intervals covering the truth | {pct(covered, len(with_ci))} | ≥ 85 % |",
+        f"| run time per campaign [s], median / max | {np.median(times):.1f} / {max(times):.1f} | ≤ 10 |",
+        "",
+        f"{jobs} processes, {total:.0f} s in all, {made:.0f} s of it generating "
+        f"(`.venv/bin/python benchmarks/zoo_survey.py --seeds {seeds}`).",
+    ]
+
+
+if __name__ == "__main__":
+    sys.exit(main())
