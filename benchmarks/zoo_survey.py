@@ -18,8 +18,6 @@ docs/discrepancy.md).
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import os
 import subprocess
 import sys
@@ -85,7 +83,10 @@ def analyse(campaign: Path) -> dict[str, Any]:
             }
             for f in report.findings
         }
-        unexplained, error = [str(u.get("where", {}).get("phase")) for u in report.unexplained], None
+        unexplained, error = (
+            [str(u.get("where", {}).get("phase")) for u in report.unexplained],
+            None,
+        )
     except Exception as err:  # noqa: BLE001 - a failure is a result here, with its reason
         found, unexplained, error = {}, [], f"{type(err).__name__}: {err}"
     return {
@@ -105,7 +106,11 @@ def judge(row: dict[str, Any], truth: dict[str, Any]) -> dict[str, Any]:
     params = []
     drift = truth["params"].get("drift_term")
     if drift and "parameter_drift" in required & named:
-        key = {"J_r": "reflected_inertia_scale", "b_v": "viscous_scale", "tau_coul": "coulomb_scale"}
+        key = {
+            "J_r": "reflected_inertia_scale",
+            "b_v": "viscous_scale",
+            "tau_coul": "coulomb_scale",
+        }
         true = float(truth["params"]["drift_ratio"])
         got = row["found"]["parameter_drift"]["parameters"].get(key[drift])
         ci = row["found"]["parameter_drift"]["interval"].get(key[drift])
@@ -155,20 +160,75 @@ def main(argv: list[str] | None = None) -> int:
                 row["truth"], row["verdict"] = truth, judge(row, truth)
                 rows.append(row)
                 v = row["verdict"]
+                left = ",".join(row["unexplained"])
+                verdict = "RIGHT" if v["right"] else f"missed {v['missed']} extra {v['extra']}"
                 print(
                     f"{row['campaign']}: required {truth['required']} -> {list(row['found'])}"
-                    f"{' unexplained ' + ','.join(row['unexplained']) if row['unexplained'] else ''}"
-                    f" {'RIGHT' if v['right'] else 'missed ' + str(v['missed']) + ' extra ' + str(v['extra'])}"
+                    f"{' unexplained ' + left if left else ''} {verdict}"
                     f"{' ERROR ' + row['error'] if row['error'] else ''} ({row['seconds']:.1f} s)",
                     file=sys.stderr,
                     flush=True,
                 )
     lines = summary(rows, args.seeds, args.jobs, time.perf_counter() - started, made)
+    lines += ["", *confusion_table(rows, Path(args.out) / "zoo_confusion.png")]
     write_results(args.out, "zoo_survey", lines, rows)
     return 0
 
 
-def summary(rows: list[dict[str, Any]], seeds: str, jobs: int, total: float, made: float) -> list[str]:
+def confusion(rows: list[dict[str, Any]]) -> tuple[list[str], list[str], Any]:
+    """Per hidden effect (and "nothing hidden"): how often it was named right, how often each
+    other effect outside `allowed` was named in its campaigns instead, and how often it was
+    missed with nothing wrong named."""
+    hidden = sorted({e for r in rows for e in r["truth"]["required"]})
+    named = sorted({e for r in rows for e in r["verdict"]["extra"]})
+    cols = ["named right", *[f"as {e}" for e in named], "missed"]
+    table = np.zeros((len(hidden) + 1, len(cols)), dtype=int)
+    for r in rows:
+        extra = r["verdict"]["extra"]
+        effects = [e for e in r["truth"]["required"] if e != "payload_gravity"] or ["(nothing)"]
+        for e in [*effects, "payload_gravity"]:
+            i = len(hidden) if e == "(nothing)" else hidden.index(e)
+            if e in r["found"] or (e == "(nothing)" and not extra):
+                table[i, 0] += 1  # (nothing hidden: right when nothing wrong is named)
+            elif extra:
+                for x in extra:
+                    table[i, 1 + named.index(x)] += 1
+            else:
+                table[i, -1] += 1
+    return [*hidden, "(nothing hidden)"], cols, table
+
+
+def confusion_table(rows: list[dict[str, Any]], image: Path) -> list[str]:
+    effects, cols, table = confusion(rows)
+    out = ["| hidden | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    out += [
+        f"| {e} | " + " | ".join(str(v) for v in row) + " |"
+        for e, row in zip(effects, table, strict=True)
+    ]
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    share = table / np.maximum(table.sum(axis=1, keepdims=True), 1)
+    fig, ax = plt.subplots(figsize=(1.1 * len(cols) + 3, 0.45 * len(effects) + 1.5))
+    ax.imshow(share, cmap="Blues", vmin=0, vmax=1, aspect="auto")
+    for (i, j), v in np.ndenumerate(table):
+        if v:
+            ax.text(j, i, str(v), ha="center", va="center", color="k" if share[i, j] < 0.6 else "w")
+    ax.set_xticks(range(len(cols)), cols, rotation=35, ha="right")
+    ax.set_yticks(range(len(effects)), effects)
+    ax.set_title("drop_zoo: what the tool said per hidden effect (counts)")
+    fig.tight_layout()
+    image.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(image, dpi=110)
+    plt.close(fig)
+    return [f"Confusion matrix: {image.name}"]
+
+
+def summary(
+    rows: list[dict[str, Any]], seeds: str, jobs: int, total: float, made: float
+) -> list[str]:
     n = len(rows)
     right = sum(r["verdict"]["right"] for r in rows)
     free = [r for r in rows if r["truth"]["required"] == ["payload_gravity"]]
@@ -185,10 +245,12 @@ def summary(rows: list[dict[str, Any]], seeds: str, jobs: int, total: float, mad
         "| measure | this tool | goal |",
         "|---|---|---|",
         f"| campaigns fully right | {pct(right, n)} | ≥ 90 % |",
-        f"| effect-free campaigns naming nothing outside `allowed` | {pct(free_ok, len(free))} | ≥ 95 % |",
+        "| effect-free campaigns naming nothing outside `allowed` | "
+        f"{pct(free_ok, len(free))} | ≥ 95 % |",
         f"| named parameters within 30 % of the truth | {pct(within, len(params))} | ≥ 90 % |",
         f"| 95 % intervals covering the truth | {pct(covered, len(with_ci))} | ≥ 85 % |",
-        f"| run time per campaign [s], median / max | {np.median(times):.1f} / {max(times):.1f} | ≤ 10 |",
+        "| run time per campaign [s], median / max | "
+        f"{np.median(times):.1f} / {max(times):.1f} | ≤ 10 (median) |",
         "",
         f"{jobs} processes, {total:.0f} s in all, {made:.0f} s of it generating "
         f"(`.venv/bin/python benchmarks/zoo_survey.py --seeds {seeds}`).",

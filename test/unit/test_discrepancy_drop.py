@@ -275,3 +275,20 @@ def test_a_recording_that_starts_during_the_fall(tmp_path: Path) -> None:
     first = report.findings[0]  # type: ignore[attr-defined]
     assert first.effect == "payload_gravity"
     assert first.parameters["mgl_nm"] == pytest.approx(truth["mgl_nm"], rel=0.05)
+
+
+def test_a_drive_limit_clips_the_impedance_and_nothing_else(tmp_path: Path) -> None:
+    """torque_saturation: a limit above every torque the trials need changes nothing; a limit
+    below the impedance's peak lets the shuttle turn the arm further; the candidate sets it."""
+    out = write_drop_campaign(tmp_path / "c", 3, hidden=[], actuator="EC60")
+    problem = _problem(out)
+    n = len(problem.held_trials)
+    base = problem.physics([], [], n)
+    _, q_free, _ = problem.held.sim.run(base)
+    _, q_high, _ = problem.held.sim.run(replace(base, torque_limit_nm=50.0))
+    _, q_low, _ = problem.held.sim.run(replace(base, torque_limit_nm=0.3))
+    assert np.array_equal(q_free, q_high)
+    assert np.all(np.abs(q_low).max(axis=1) > np.abs(q_free).max(axis=1) + 1e-3)
+    saturation = next(c for c in problem.candidates() if c.name == "torque_saturation")
+    ph = saturation.apply(base, np.array([0.3]), problem)
+    assert ph.torque_limit_nm == 0.3

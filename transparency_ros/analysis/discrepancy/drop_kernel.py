@@ -60,6 +60,7 @@ COLUMNS = (
     "encoder_step",
     "substeps",  # integration steps per output step
     "contact_substeps",  # the same while a contact spring is (about to be) compressed
+    "limit",  # the drive's impedance torque is clipped here [N m] (inf: no saturation)
 )
 (
     MASS,
@@ -84,6 +85,7 @@ COLUMNS = (
     ENCODER_STEP,
     SUBSTEPS,
     CONTACT_SUBSTEPS,
+    LIMIT,
 ) = range(len(COLUMNS))
 
 
@@ -139,6 +141,17 @@ def sense(q: float, step: float) -> float:
     return round(q / step) * step if step > 0.0 else q
 
 
+@jit
+def drive_torque(row: Any, q: float, w: float, dt: float) -> float:
+    """The motor's torque at motor position ``q`` (speed ``w``): the impedance at the step's
+    midpoint (predicted: held at the step's start it would lag by half a step, a steady error
+    in the swing) on the sensed position, clipped at the drive's limit, then the offset (which
+    does not pass through the controller)."""
+    impedance = row[K_S] * (row[THETA_D] - sense(q, row[ENCODER_STEP]) - 0.5 * w * dt)
+    limit = row[LIMIT]
+    return float(min(max(impedance, -limit), limit) + row[OFFSET])
+
+
 # the state of one row, stepped in place: motor and arm (load side) angle and speed, shuttle
 # height and speed, whether the shuttle rides on the arm and whether the gearbox is engaged
 QM, WM, QL, WL, Y, V, GLUED, ENGAGED = range(8)
@@ -189,11 +202,7 @@ def forces(row: Any, s: Any, dt: float) -> tuple[float, float, float]:
     """(motor drive, load on the arm, shuttle acceleration) at the step's start."""
     m, r, weight = row[MASS], row[ARM], row[WEIGHT]
     cos = math.cos(s[QL])
-    # the impedance at the step's midpoint (predicted): held at the step's start it would lag
-    # by half a step, a steady error in the swing
-    drive = (
-        row[K_S] * (row[THETA_D] - sense(s[QM], row[ENCODER_STEP]) - 0.5 * s[WM] * dt) + row[OFFSET]
-    )
+    drive = drive_torque(row, s[QM], s[WM], dt)
     load, acc_y = 0.0, -GRAVITY
     if math.isfinite(row[STIFFNESS]):
         closing = r * cos * s[WL] - s[V]
@@ -294,10 +303,7 @@ def strikes(row: Any, s: Any, acc: tuple[float, float, float], dt: float) -> Non
         j_after = j_a + (m * r * r if glued else 0.0)
         load_after = -row[WEIGHT] * cos if glued else 0.0
         if s[ENGAGED]:
-            drive = (
-                row[K_S] * (row[THETA_D] - sense(qm_c, row[ENCODER_STEP]) - 0.5 * wm_c * tau)
-                + row[OFFSET]
-            )
+            drive = drive_torque(row, qm_c, wm_c, tau)
             fr = (row[VISCOUS], row[COULOMB], row[STATIC])
             w_end, mean = friction_step(w_new, j_after + j_r, drive + load_after, tau, fr)
             s[QM], s[WM] = qm_c + mean * tau, w_end

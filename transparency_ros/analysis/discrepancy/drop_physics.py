@@ -50,6 +50,7 @@ class DropPhysics:
     backlash_rad: FloatArray | float = 0.0
     delay_s: FloatArray | float = 0.0
     encoder_step_rad: FloatArray | float = 0.0
+    torque_limit_nm: FloatArray | float = math.inf  # the drive's impedance torque clipped
 
     def rows(self, n: int) -> DropPhysics:
         """Every value as an array of ``n`` rows."""
@@ -165,6 +166,7 @@ class DropSimulator:
             ph.encoder_step_rad,
             np.full(n, SUBSTEPS),
             contact_substeps,
+            ph.torque_limit_nm,
         ]
         out_q = np.empty((n, steps))
         out_y = np.empty((n, steps))

@@ -112,17 +112,34 @@ def _bounded_least_squares(
 
 
 def interval(result: Any, x: FloatArray) -> list[tuple[float, float]]:
-    """95 % intervals of ``x`` from the least-squares fit's Jacobian (none: the value itself)."""
+    """95 % intervals of ``x`` from the least-squares fit's Jacobian (none: the value itself).
+    A simulation's residual is not white: what the model still misses runs through many
+    samples. The covariance is widened by the residual's own correlation, (1 + rho) / (1 - rho)
+    for its lag-1 autocorrelation rho (an AR(1) error: n samples weigh as n (1 - rho) /
+    (1 + rho) independent ones); with white-noise intervals, 4 in 9 zoo parameters were
+    covered."""
     if result is None or result.jac is None:
         return [(float(v), float(v)) for v in x]
     dof = max(1, result.fun.size - x.size)
-    sigma2 = 2 * result.cost / dof
+    sigma2 = 2 * result.cost / dof * correlation_inflation(result.fun, x.size)
     try:
         cov = np.linalg.pinv(result.jac.T @ result.jac) * sigma2
     except np.linalg.LinAlgError:
         return [(math.nan, math.nan) for _ in x]
     half = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     return [(float(v - h), float(v + h)) for v, h in zip(x, half, strict=True)]
+
+
+def correlation_inflation(residual: FloatArray, k: int) -> float:
+    """How much a correlated residual widens an interval's variance: (1 + rho) / (1 - rho) for
+    its lag-1 autocorrelation rho, at most as if only k + 1 samples were independent."""
+    r = np.asarray(residual, dtype=float)
+    energy = float(r @ r)
+    if r.size < 3 or energy <= 0.0:
+        return 1.0
+    rho = float(np.clip((r[:-1] @ r[1:]) / energy, 0.0, 1.0))
+    most = max(1.0, r.size / (k + 1))
+    return float(min((1 + rho) / max(1 - rho, 1e-12), most))
 
 
 def jacobian(
