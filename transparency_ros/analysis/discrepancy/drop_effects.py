@@ -136,19 +136,6 @@ class StructuralCompliance(DropEffect):
         return {"stiffness_n_per_m": float(10 ** p[0])}
 
 
-class DropSaturation(DropEffect):
-    """The drive clips its impedance torque at ``limit_nm`` (a current limit)."""
-
-    def __init__(self) -> None:
-        super().__init__("torque_saturation", ("limit_nm",), (0.02,), (3.0,))
-
-    def initial(self, problem: DropProblem) -> FloatArray:
-        return np.array([1.0])
-
-    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return replace(ph, torque_limit_nm=float(p[0]))
-
-
 class DropQuantization(DropEffect):
     def __init__(self) -> None:
         super().__init__(
@@ -177,5 +164,6 @@ def drop_library(shuttle_mass_kg: float) -> list[DropEffect]:
         SetPhysics("backlash", "backlash_rad", 0.0, 0.05, "backlash_rad"),
         SetPhysics("sensor_delay", "delay_s", 0.0, 0.02, "delay_s", sensor="encoder"),
         DropQuantization(),
-        DropSaturation(),
+        # the drive clips its impedance torque (a current limit); the offset is added after it
+        SetPhysics("torque_saturation", "limit_nm", 0.02, 3.0, "torque_limit_nm"),
     ]
