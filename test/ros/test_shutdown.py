@@ -63,9 +63,11 @@ def stopped(proc: subprocess.Popen[str], sig: signal.Signals) -> tuple[int, str]
 
 def test_ctrl_c_of_the_behavior_while_sweeping(driver: Any) -> None:
     node, _ = driver
-    client = node.create_client(Trigger, "/feel_cage_behavior/start")
     for attempt in range(TRIES):
         proc = start("feel_cage_behavior", "actuator:=U10DD")
+        # a client of its own per process: one kept from the last try may still see that
+        # process's server in the graph, and its request then goes to nobody
+        client = node.create_client(Trigger, "/feel_cage_behavior/start")
         assert client.wait_for_service(timeout_sec=20.0)
         started = False
         deadline = time.monotonic() + 10.0
@@ -77,6 +79,7 @@ def test_ctrl_c_of_the_behavior_while_sweeping(driver: Any) -> None:
         assert started, f"try {attempt}: the sweep did not start"
         time.sleep(0.3 + 0.1 * attempt)  # sweeping: commands at its refresh rate
         code, out = stopped(proc, signal.SIGINT)
+        node.destroy_client(client)
         assert code == 0 and "Traceback" not in out and "RCLError" not in out, (attempt, out)
 
 
