@@ -16,6 +16,7 @@ from transparency_ros.analysis.discrepancy.drop import (
     load_drop_nominal,
     load_drop_trial,
 )
+from transparency_ros.analysis.discrepancy.drop_trials import rest_position
 from transparency_ros.bag.reader import find_bags
 from transparency_ros.core import strict_json
 from transparency_ros.synth.drop_campaign import write_drop_campaign
@@ -155,7 +156,7 @@ def test_the_drop_integrator_has_converged_at_its_step(tmp_path: Path) -> None:
     out = write_drop_campaign(tmp_path / "c", 3, hidden=[], actuator="EC60")
     problem = _problem(out)
     floor = problem.noise_floor()
-    base = problem.physics([], [], len(problem.held_trials))
+    base = problem.physics([], [], problem.held_trials)
     cases = [
         {},
         {"restitution": 0.5},
@@ -184,8 +185,10 @@ def _rewrite(
     from_before_contact_s: float | None = None,
     commands: bool = True,
     custom: dict[str, str] | None = None,
+    effort_shift_nm: float | None = 0.0,
 ) -> None:
-    """Every bag under ``src`` rewritten into ``dst`` (same relative paths)."""
+    """Every bag under ``src`` rewritten into ``dst`` (same relative paths); the recorded
+    efforts shifted by ``effort_shift_nm`` (None: not recorded)."""
     from transparency_ros.bag.reader import open_bag  # noqa: PLC0415
     from transparency_ros.bag.writer import BagWriter  # noqa: PLC0415
 
@@ -213,6 +216,12 @@ def _rewrite(
                     msg.position = -msg.position
                     msg.velocity = -msg.velocity
                     msg.effort = -msg.effort
+                if topic == "/joint_states":
+                    msg.effort = (
+                        msg.effort + effort_shift_nm
+                        if effort_shift_nm is not None
+                        else np.full_like(msg.effort, np.nan)
+                    )
                 writer.write_message(topic, log, msg)
 
 
@@ -267,7 +276,7 @@ def test_a_recording_that_starts_during_the_fall(tmp_path: Path) -> None:
     trials = problem.fit_trials + problem.held_trials
     assert not any(t.release_recorded for t in trials)
     assert any("starts 0.1 s before contact, during the fall" in n for n in problem.notes)
-    assert any("no /joint_commands: theta_d taken as the arm's rest position" in n
+    assert any("no /joint_commands: theta_d from the recorded drive torque" in n
                for n in problem.notes)  # fmt: skip
     err = problem.error([], [], True)
     fall = err[problem.phases()["before_contact"]]
@@ -282,8 +291,7 @@ def test_a_drive_limit_clips_the_impedance_and_nothing_else(tmp_path: Path) -> N
     below the impedance's peak lets the shuttle turn the arm further; the candidate sets it."""
     out = write_drop_campaign(tmp_path / "c", 3, hidden=[], actuator="EC60")
     problem = _problem(out)
-    n = len(problem.held_trials)
-    base = problem.physics([], [], n)
+    base = problem.physics([], [], problem.held_trials)
     _, q_free, _ = problem.held.sim.run(base)
     _, q_high, _ = problem.held.sim.run(replace(base, torque_limit_nm=50.0))
     _, q_low, _ = problem.held.sim.run(replace(base, torque_limit_nm=0.3))
@@ -292,3 +300,22 @@ def test_a_drive_limit_clips_the_impedance_and_nothing_else(tmp_path: Path) -> N
     saturation = next(c for c in problem.candidates() if c.name == "torque_saturation")
     ph = saturation.apply(base, np.array([0.3]), problem)
     assert ph.torque_limit_nm == 0.3
+
+
+def test_without_commands_theta_d_is_read_from_the_drive_torque(tmp_path: Path) -> None:
+    """No /joint_commands: theta_d is theta + effort / k_s at rest before contact (friction may
+    hold the arm off theta_d; taken as the rest position, a zoo rig's 0.03 rad became a 0.06
+    N m 'offset'); without efforts, the rest position, said as a guess."""
+    out = write_drop_campaign(tmp_path / "c", 1, hidden=[], actuator="T2822")
+    k_s = _problem(out).fit_trials[0].k_s
+    commanded = {t.name: t.theta_d for t in _problem(out).fit_trials}
+    _rewrite(out / "bags", tmp_path / "e" / "bags", commands=False, effort_shift_nm=0.05)
+    shifted = _problem(tmp_path / "e").fit_trials
+    for trial in shifted:
+        assert trial.theta_d == pytest.approx(commanded[trial.name] + 0.05 / k_s, abs=1e-9)
+        assert any("theta + effort / k_s" in n for n in trial.notes)
+    _rewrite(out / "bags", tmp_path / "n" / "bags", commands=False, effort_shift_nm=None)
+    for trial in _problem(tmp_path / "n").fit_trials:
+        assert trial.theta_d == rest_position(trial)
+        assert any("no efforts: theta_d taken as the arm's rest position" in n
+                   for n in trial.notes)  # fmt: skip

@@ -39,6 +39,7 @@ from transparency_ros.analysis.discrepancy.findings import (
     leftover,
     locate,
     update_findings,
+    widen,
 )
 from transparency_ros.analysis.discrepancy.fitting import (
     aic,
@@ -117,13 +118,25 @@ class Discoverer:
         params: list[FloatArray] = []
         held_err = problem.error(effects, params, True)
         report.heldout_rmse_nominal = rmse(held_err)
-        remaining = problem.candidates()
+        remaining = [c for c in problem.candidates() if not getattr(c, "declared", False)]
         floor = problem.noise_floor()
         closest: _Step | None = None
-        while remaining and rmse(held_err) > SIGNIFICANT * floor:
+        # effects whose size the recording declares (no parameter fitted) come first, each
+        # named where it improves the held-out fit: known physics is in the model before
+        # anything is searched for (a fitted constant torque would take the declared weight).
+        # One that does not improve it yet is tried again after each effect found (a large
+        # missing effect may hide it)
+        effects, params, held_err = self._declared(report, effects, params, held_err, floor)
+        left = getattr(problem, "structure_left", lambda e: rmse(e) > SIGNIFICANT * floor)
+        while remaining and left(held_err):
             base = _Base(held_err, rmse(held_err), aic(held_err, _total(params)), floor)
             singles = [self._single(effects, params, cand, base) for cand in remaining]
             step = self._choose([s for s in singles if self._names(s, base)])
+            if step is None:
+                # a declared effect a large missing one hid: the two together
+                step = self._choose(
+                    [s for s in self._with_declared(effects, singles, base) if self._names(s, base)]
+                )
             if step is None and base.rmse > LEFTOVER * floor:
                 # structure is left that no single effect explains: two missing effects may
                 # each explain too little alone (one stands in for the other). Not below: a
@@ -151,7 +164,9 @@ class Discoverer:
             if step.joint:  # every parameter refitted: the findings' values and intervals
                 intervals = interval(step.result, step.result.x)
                 update_findings(report, effects, params, intervals)
+            effects, params, held_err = self._declared(report, effects, params, held_err, floor)
         report.fitted = list(zip(effects, params, strict=True))
+        widen(report, getattr(problem, "model_error_share", 0.0))
         report.final_heldout_rmse = rmse(held_err)
         report.unexplained = leftover(
             problem,
@@ -162,6 +177,49 @@ class Discoverer:
         )
         report.seconds = time.perf_counter() - started
         return report
+
+    def _declared(
+        self,
+        report: Report,
+        effects: list[Any],
+        params: list[FloatArray],
+        held_err: FloatArray,
+        floor: float,
+    ) -> tuple[list[Any], list[FloatArray], FloatArray]:
+        """Each declared effect not yet in the model, added where it improves the held-out
+        fit (lower RMSE, information criterion better by 10)."""
+        for cand in self.problem.candidates():
+            if not getattr(cand, "declared", False) or any(cand is e for e in effects):
+                continue
+            base = _Base(held_err, rmse(held_err), aic(held_err, _total(params)), floor)
+            step = self._single(effects, params, cand, base)
+            if not (step.meaningful and step.rmse < base.rmse and step.aic < base.aic - 10):
+                continue
+            report.findings.append(self._finding(cand, step, base, base.rmse, step.rmse))
+            self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
+            effects, params, held_err = [*effects, cand], step.params, step.err
+        return effects, params, held_err
+
+    def _with_declared(self, effects: list[Any], singles: list[_Step], base: _Base) -> list[_Step]:
+        """The best few single candidates each with every declared effect not yet in the
+        model (nothing fitted for those): a declared effect is tried alone before the search
+        and after each effect found, but a large missing effect may hide it until both are
+        in (a sensor's delay and the shuttle's weight on the zoo)."""
+        pending = [
+            c
+            for c in self.problem.candidates()
+            if getattr(c, "declared", False) and all(c is not e for e in effects)
+        ]
+        out = []
+        for single in sorted(singles, key=lambda c: c.rmse)[:PAIR_FINALISTS] if pending else []:
+            for cand in pending:
+                x = self.problem.initial(cand)
+                step = self._step(effects, [*single.params, x], [*single.added, cand], None, base)
+                if single.joint or single.result is not None:
+                    step.result, step.joint = single.result, single.joint
+                step.alone_rmse, step.alone_aic = [single.rmse], [single.aic]
+                out.append(step)
+        return out
 
     def _single(
         self, effects: list[Any], params: list[FloatArray], cand: Any, base: _Base
@@ -205,14 +263,22 @@ class Discoverer:
 
     def _gain(self, added: list[Any], base: _Base, err: FloatArray) -> float:
         """The share of the held-out error above the noise floor that ``added`` removes; for
-        effects of one sensor's readings (``sensor_scope`` of the problem), of that sensor's
-        error above its own floor."""
+        effects of one sensor's readings (``sensor_scope`` of the problem), and when only one
+        sensor's error is left above its floor (``leftover_scope``), of that sensor's error
+        above its own floor."""
+        before, after, floor = self._judged(added, base, err)
+        return float((before - after) / max(before - floor, 1e-12))
+
+    def _judged(self, added: list[Any], base: _Base, err: FloatArray) -> tuple[float, float, float]:
+        """(RMSE before, after, floor) of the held-out error ``added`` is judged on."""
         scope = getattr(self.problem, "sensor_scope", lambda _a: None)(added)
+        if scope is None and base.rmse <= SIGNIFICANT * base.floor:
+            # the pooled error is near its floor: what is left is one sensor's, judged there
+            scope = getattr(self.problem, "leftover_scope", lambda _e: None)(base.err)
         if scope is None:
-            return (base.rmse - rmse(err)) / max(base.rmse - base.floor, 1e-12)
+            return base.rmse, rmse(err), base.floor
         mask, floor = scope
-        before = rmse(base.err[mask])
-        return float((before - rmse(err[mask])) / max(before - floor, 1e-12))
+        return rmse(base.err[mask]), rmse(err[mask]), floor
 
     def _names(self, step: _Step, base: _Base) -> bool:
         """Whether ``step`` names its effects: it removes at least ``min_improvement`` of the
@@ -223,11 +289,39 @@ class Discoverer:
         something else explains part of it."""
         return (
             step.meaningful
-            and base.rmse - step.rmse >= 0.1 * base.floor
+            and not self._null_inside(step)
+            and self._removes_a_tenth(step, base)
             and step.gain >= self.min_improvement
             and step.aic < base.aic - 10
             and all(step.aic < a - 10 for a in step.alone_aic)
         )
+
+    def _removes_a_tenth(self, step: _Step, base: _Base) -> bool:
+        before, after, floor = self._judged(step.added, base, step.err)
+        return before - after >= 0.1 * floor
+
+    @staticmethod
+    def _null_inside(step: _Step) -> bool:
+        """Whether the 95 % interval of an added effect holds its value of no effect
+        (``null``: no backlash, no delay) for every parameter: the data do not tell it from
+        nothing, however much the fitted value removes. The fitted parameters of the added
+        effects are the last of the fit's."""
+        if step.result is None or getattr(step.result, "jac", None) is None:
+            return False
+        ci = interval(step.result, step.result.x)
+        end = len(ci)
+        for effect, x in reversed(step.new()):
+            if not getattr(effect, "fittable", True):
+                continue
+            own, end = ci[end - x.size : end], end - x.size
+            null = getattr(effect, "null", None)
+            if (
+                null is not None
+                and own
+                and all(lo <= z <= hi for (lo, hi), z in zip(own, null, strict=True))
+            ):
+                return True
+        return False
 
     def _choose(self, steps: list[_Step]) -> _Step | None:
         """The best step by the information criterion. Steps that explain the held-out data
@@ -305,7 +399,7 @@ class Discoverer:
         x = step.params[len(step.params) - len(step.added) + step.added.index(cand)]
         ci = (
             interval(step.result, x)
-            if not step.joint
+            if not step.joint and getattr(cand, "fittable", True)
             else [(float(v), float(v)) for v in x]  # set from the joint fit afterwards
         )
         together = [a.name for a in step.added if a is not cand]

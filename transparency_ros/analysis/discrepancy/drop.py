@@ -60,7 +60,12 @@ from transparency_ros.analysis.discrepancy.drop_trials import (
     rest_position,
 )
 from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
-from transparency_ros.analysis.discrepancy.problem import Trace, position_noise, spectrum_peak
+from transparency_ros.analysis.discrepancy.problem import (
+    SIGNIFICANT,
+    Trace,
+    position_noise,
+    spectrum_peak,
+)
 from transparency_ros.core.errors import ConfigError
 
 __all__ = ["PHASES", "DropProblem", "DropTrial", "load_drop_nominal", "load_drop_trial"]
@@ -196,7 +201,11 @@ class DropProblem:
         # position (outside the library) 50-65 %
         self.min_improvement = 0.75
         mass = float(np.mean([t.mass_kg for t in trials]))
-        self._candidates = list(candidates) if candidates is not None else drop_library(mass)
+        self._candidates = (
+            list(candidates)
+            if candidates is not None
+            else drop_library(mass, nominal.coulomb_nm[self.actuator])
+        )
         self.nominal = {
             k: v for k, v in nominal.as_dict().items() if k.startswith(f"{self.actuator}.")
         }
@@ -205,36 +214,44 @@ class DropProblem:
             "heldout": [t.name for t in self.held_trials],
         }
         self.notes = conventions(trials)
-        # what the recordings predict (see expected): the torque that held the arm off theta_d
-        # before contact, and the shuttle's weight on the arm
-        self._held_nm = -float(np.median([t.k_s * (t.theta_d - rest_position(t)) for t in trials]))
-        self._weight_nm = float(np.mean([t.mass_kg * GRAVITY * t.arm_m for t in trials]))
+        # what the recordings predict: the torque that held the arm off theta_d before contact
+        # (see expected; in the rig's theta sense) and the shuttle's weight on the arm
+        self._held_nm = -float(
+            np.median(
+                [
+                    t.strike_sign * MODEL_STRIKE_SIGN * t.k_s * (t.theta_d - rest_position(t))
+                    for t in trials
+                ]
+            )
+        )
+        self.declared_weight_nm = float(np.mean([t.mass_kg * GRAVITY * t.arm_m for t in trials]))
 
     def physics(
-        self, effects: Sequence[DropEffect], params: Sequence[FloatArray], n: int
+        self,
+        effects: Sequence[DropEffect],
+        params: Sequence[FloatArray],
+        trials: Sequence[DropTrial],
     ) -> DropPhysics:
         a = self.actuator
-        ones = np.ones(n)
+        ones = np.ones(len(trials))
         ph = DropPhysics(
             rotor_inertia_kgm2=ones * self.model.reflected_inertia_kgm2[a],
             viscous_nms_per_rad=ones * self.model.viscous_nms_per_rad[a],
             coulomb_nm=ones * self.model.coulomb_nm[a],
             static_nm=ones * self.model.coulomb_nm[a],
+            sense=np.array([float(t.strike_sign * MODEL_STRIKE_SIGN) for t in trials]),
         )
         for effect, p in zip(effects, params, strict=True):
             ph = effect.apply(ph, p, self)
         return ph
 
     def expected(self, effect: DropEffect, p: FloatArray) -> bool:
-        """Whether the recording itself predicts this fitted effect, within 30 %: the shuttle's
-        weight on the arm (m_s g r from its custom_data), unless the arm was already held away
-        from theta_d before contact; a constant torque offset, when it was (k_s (theta_d - rest)
-        = -offset: a torque the weight, which acts only in contact, cannot explain)."""
-        held, weight = self._held_nm, self._weight_nm
-        if effect.name == "payload_gravity":
-            return abs(float(p[0]) - weight) <= 0.3 * weight and abs(held) < 0.3 * weight
+        """Whether the recording itself predicts this fitted effect, within 30 %: a constant
+        torque offset, when the arm was held away from theta_d before contact by as much
+        (k_s (theta_d - rest) = -offset: a torque the weight, which acts only in contact,
+        cannot explain). (The weight's size is declared, not fitted: ``DeclaredWeight``.)"""
         if effect.name == "torque_offset":
-            return abs(float(p[0]) - held) <= 0.3 * abs(float(p[0]))
+            return abs(float(p[0]) - self._held_nm) <= 0.3 * abs(float(p[0]))
         return False
 
     def candidates(self) -> list[DropEffect]:
@@ -247,7 +264,7 @@ class DropProblem:
         self, effects: Sequence[DropEffect], params: Sequence[FloatArray], held: bool
     ) -> FloatArray:
         s = self.held if held else self.fit
-        return s.error(self.physics(effects, params, len(s.trials)))
+        return s.error(self.physics(effects, params, s.trials))
 
     def error_sets(
         self,
@@ -256,8 +273,7 @@ class DropProblem:
         held: bool,
     ) -> list[FloatArray]:
         s = self.held if held else self.fit
-        n = len(s.trials)
-        return s.error_many([self.physics(effects, params, n) for params in param_sets])
+        return s.error_many([self.physics(effects, params, s.trials) for params in param_sets])
 
     def phases(self) -> dict[str, BoolArray]:
         masks: dict[str, list[BoolArray]] = {name: [] for name in PHASES}
@@ -316,6 +332,41 @@ class DropProblem:
         )
         return q_noise, h_noise
 
+    def structure_left(self, err: FloatArray) -> bool:
+        """Whether the held-out error ``err`` still has something to explain: the pooled error
+        above 1.5x the noise floor, or the encoder's part above 1.5x the encoder's own floor
+        (see leftover_scope). Pooled, a potentiometer's noise (up to 2 mrad at the arm) hid an
+        encoder's error of several of its counts (a torque offset of 0.07 N m on the zoo)."""
+        pooled = float(np.sqrt(np.mean(err**2))) > SIGNIFICANT * self.noise_floor()
+        return pooled or self.leftover_scope(err) is not None
+
+    def leftover_scope(self, err: FloatArray) -> tuple[BoolArray, float] | None:
+        """The encoder's error elements and floor, when its part of ``err`` is above 1.5x that
+        floor: what is left there is judged there (a dynamics effect that removes it removes
+        the encoder's error; one fitted to the heights' noise does not). The encoder's floor is
+        its noise at rest or a count's quantization error (count / sqrt 12), whichever is
+        larger: a fine encoder at rest reads one value, a floor of 0 that any error exceeds."""
+        enc = self._encoder_elements
+        if not enc.any():
+            return None
+        floor = self._encoder_floor
+        return (
+            (enc, floor) if float(np.sqrt(np.mean(err[enc] ** 2))) > SIGNIFICANT * floor else None
+        )
+
+    @cached_property
+    def _encoder_floor(self) -> float:
+        # a count: the finest spacing of the values a trial read, or of its steps (a moving
+        # arm's successive samples are many counts apart, but steps differ by whole counts)
+        counts = []
+        for t in self.fit_trials:
+            steps = np.abs(np.diff(t.q))
+            spacing = np.r_[np.diff(np.unique(t.q)), np.diff(np.unique(steps[steps > 1e-12]))]
+            spacing = spacing[spacing > 1e-9]
+            counts.append(float(np.min(spacing)) if spacing.size else 0.0)
+        count = float(np.median(counts)) if counts else 0.0
+        return max(self._sensor_noise[0], count / math.sqrt(12))
+
     def sensor_scope(self, effects: Sequence[DropEffect]) -> tuple[BoolArray, float] | None:
         """For effects that all act on the encoder's readings alone (its lattice, its lateness):
         the held-out error elements of the encoder and its noise floor, on which they are
@@ -337,7 +388,7 @@ class DropProblem:
     ) -> float:
         """Where the held-out encoder residual after contact has most power (uniformly
         resampled at 1 kHz)."""
-        ph = self.physics(effects, params, len(self.held_trials))
+        ph = self.physics(effects, params, self.held_trials)
         t_sim, q_sim, _ = self.held.sim.run(ph)
         best_f, best_p = math.nan, -1.0
         for i in range(len(self.held_trials)):
@@ -356,8 +407,8 @@ class DropProblem:
         name = labels[segment][0]
         i = next(k for k, t in enumerate(self.held_trials) if t.name == name)
         trial = self.held_trials[i]
-        t_sim, q_nom, _ = self.held.sim.run(self.physics([], [], len(self.held_trials)))
-        ph = self.physics(effects, params, len(self.held_trials))
+        t_sim, q_nom, _ = self.held.sim.run(self.physics([], [], self.held_trials))
+        ph = self.physics(effects, params, self.held_trials)
         _, q_fin, _ = self.held.sim.run(ph)
         t_q, q = self.held.q[i]
         return Trace(

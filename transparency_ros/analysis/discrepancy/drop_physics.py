@@ -51,6 +51,9 @@ class DropPhysics:
     delay_s: FloatArray | float = 0.0
     encoder_step_rad: FloatArray | float = 0.0
     torque_limit_nm: FloatArray | float = math.inf  # the drive's impedance torque clipped
+    # +1 where the trial is analysed as recorded, -1 where mirrored (the rig turns positive):
+    # what turns a torque in the rig's theta sense into the model's (not integrated)
+    sense: FloatArray | float = 1.0
 
     def rows(self, n: int) -> DropPhysics:
         """Every value as an array of ``n`` rows."""

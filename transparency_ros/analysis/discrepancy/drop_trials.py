@@ -10,7 +10,9 @@ Rigs differ in what the bag contract leaves open, so a trial says what it found 
   it, else from the data (the arm's first swing after contact);
 * a recording that starts during the fall (triggered near contact): the release is not recorded,
   and the fall is fitted from the part that is; its parabola's vertex stands for the release;
-* no /joint_commands: theta_d is the arm's rest position before contact.
+* no /joint_commands: theta_d is what the drive's recorded torque says it was, theta +
+  effort / k_s at rest before contact (the impedance law); without efforts either, the arm's rest
+  position (friction may hold the arm off theta_d, so that is a guess the notes say).
 """
 
 from __future__ import annotations
@@ -20,10 +22,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from transparency_ros.analysis.discrepancy.model import FloatArray
 from transparency_ros.bag.errors import BagReadError
-from transparency_ros.bag.reader import joint_series, open_bag, scalar_series
+from transparency_ros.bag.reader import JointSeries, joint_series, open_bag, scalar_series
 from transparency_ros.core.config import load_drop_test
 from transparency_ros.core.errors import ModelError
 
@@ -119,11 +122,18 @@ def load_drop_trial(path: str | Path) -> DropTrial:
         )
     rest = float(np.median(q[t_q < contact - LEAD_S][-10:]))
     if theta_d is None:
-        theta_d = rest
-        notes.append(
-            f"no /joint_commands: theta_d taken as the arm's rest position before contact, "
-            f"{rest:.4g} rad"
-        )
+        theta_d = _setpoint_from_effort(states, keep, t0_ns, contact, numbers["transparency.k_s"])
+        if theta_d is not None:
+            notes.append(
+                "no /joint_commands: theta_d from the recorded drive torque at rest before "
+                f"contact (theta + effort / k_s), {theta_d:.4g} rad"
+            )
+        else:
+            theta_d = rest
+            notes.append(
+                "no /joint_commands and no efforts: theta_d taken as the arm's rest position "
+                f"before contact, {rest:.4g} rad (friction may hold the arm off it)"
+            )
     sign = _strike_sign(t_q, q, rest, contact, declared, notes=notes)
     if sign != MODEL_STRIKE_SIGN:
         q, theta_d = -q, -theta_d
@@ -245,6 +255,20 @@ def _release(
     if falling:
         held = c0 - c1 * c1 / (4 * c2)  # the vertex: the height it fell from
     return held, release, (c2, c1, c0, mid), not falling
+
+
+def _setpoint_from_effort(
+    states: JointSeries, keep: npt.NDArray[np.bool_], t0_ns: int, contact: float, k_s: float
+) -> float | None:
+    """theta_d by the impedance law tau = k_s (theta_d - theta) from the last 50 ms before the
+    impact piece's start, where the arm is at rest (the damping term is then nil); None when
+    the recording has no efforts there or k_s is not positive."""
+    t = states.seconds(t0_ns)[keep]
+    effort, q = states.effort[keep], states.position[keep]
+    sel = (t < contact - LEAD_S) & (t >= contact - LEAD_S - 0.05) & np.isfinite(effort)
+    if k_s <= 0 or np.count_nonzero(sel) < 5:
+        return None
+    return float(np.median(q[sel] + effort[sel] / k_s))
 
 
 def rest_position(trial: DropTrial) -> float:

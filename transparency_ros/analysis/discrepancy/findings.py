@@ -101,6 +101,25 @@ def update_findings(
         )
 
 
+def widen(report: Report, share: float) -> None:
+    """Each finding's intervals widened by the model's own error: a half-width of
+    sqrt(h^2 + (share x)^2) for a fitted x of statistical half-width h. The fit's interval
+    says what the noise allows; what the model still misses (a friction or contact law not
+    its own) biases every trial alike, which no interval from the same fit can show."""
+    if share <= 0:
+        return
+    for i, finding in enumerate(report.findings):
+        ci = {}
+        for name, (lo, hi) in finding.confidence_interval.items():
+            x = finding.parameters[name]
+            if lo == hi:  # nothing fitted: a declared or read-off value
+                ci[name] = (lo, hi)
+                continue
+            half = math.hypot((hi - lo) / 2, share * x)
+            ci[name] = (x - half, x + half)
+        report.findings[i] = replace(finding, confidence_interval=ci)
+
+
 def leftover(
     problem: Problem,
     err: FloatArray,
