@@ -403,6 +403,13 @@ class Discoverer:
             else [(float(v), float(v)) for v in x]  # set from the joint fit afterwards
         )
         together = [a.name for a in step.added if a is not cand]
+        judged_before, judged_after, judged_floor = self._judged(step.added, base, step.err)
+        judged = (
+            f"; judged on the encoder: {judged_before:.4g} -> {judged_after:.4g} rad "
+            f"(its floor {judged_floor:.3g} rad)"
+            if judged_floor != base.floor
+            else ""
+        )
         return Finding(
             effect=cand.name,
             parameters={n: float(v) for n, v in zip(cand.param_names, x, strict=True)}
@@ -412,6 +419,7 @@ class Discoverer:
             evidence=(
                 f"held-out simulation RMSE {before:.4g} -> {after:.4g} rad "
                 f"({100 * (1 - after / before):.0f} % lower) with {x.size} parameter(s)"
+                + judged
                 + (
                     f"; found together with {', '.join(together)} (neither explains it alone)"
                     if together
