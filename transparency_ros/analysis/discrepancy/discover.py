@@ -16,7 +16,11 @@ least a tenth of the floor in absolute terms, the held-out information criterion
 candidate passes and structure is left, candidates are fitted two at a time (two missing
 effects may each explain too little alone). A kept effect gets its parameters with 95 %
 confidence intervals (from the fit's Jacobian), where it acted (the motion phase whose residual
-it reduced most, and the trial and time window of the largest reduction) and the evidence. What
+it reduced most, and the trial and time window of the largest reduction) and the evidence.
+Effects whose size the recording declares (the shuttle's weight: ``declared``) are not searched
+for: each is added, nothing fitted, where it improves the held-out fit, before the search and
+after each finding. A 95 % interval holding an effect's null value (``null``) names nothing;
+intervals are widened by the problem's ``model_error_share`` of the value at the end. What
 is left is checked for structure (phase RMS against the noise floor, its dominant frequency, how
 much of it the state explains, the closest candidate) and reported as ``unexplained``, never
 forced onto a label.
@@ -188,9 +192,7 @@ class Discoverer:
     ) -> tuple[list[Any], list[FloatArray], FloatArray]:
         """Each declared effect not yet in the model, added where it improves the held-out
         fit (lower RMSE, information criterion better by 10)."""
-        for cand in self.problem.candidates():
-            if not getattr(cand, "declared", False) or any(cand is e for e in effects):
-                continue
+        for cand in self._pending_declared(effects):
             base = _Base(held_err, rmse(held_err), aic(held_err, _total(params)), floor)
             step = self._single(effects, params, cand, base)
             if not (step.meaningful and step.rmse < base.rmse and step.aic < base.aic - 10):
@@ -200,23 +202,26 @@ class Discoverer:
             effects, params, held_err = [*effects, cand], step.params, step.err
         return effects, params, held_err
 
+    def _pending_declared(self, effects: list[Any]) -> list[Any]:
+        """The declared effects (``declared`` of a candidate) not yet in the model."""
+        return [
+            c
+            for c in self.problem.candidates()
+            if getattr(c, "declared", False) and all(c is not e for e in effects)
+        ]
+
     def _with_declared(self, effects: list[Any], singles: list[_Step], base: _Base) -> list[_Step]:
         """The best few single candidates each with every declared effect not yet in the
         model (nothing fitted for those): a declared effect is tried alone before the search
         and after each effect found, but a large missing effect may hide it until both are
         in (a sensor's delay and the shuttle's weight on the zoo)."""
-        pending = [
-            c
-            for c in self.problem.candidates()
-            if getattr(c, "declared", False) and all(c is not e for e in effects)
-        ]
+        pending = self._pending_declared(effects)
         out = []
         for single in sorted(singles, key=lambda c: c.rmse)[:PAIR_FINALISTS] if pending else []:
             for cand in pending:
                 x = self.problem.initial(cand)
                 step = self._step(effects, [*single.params, x], [*single.added, cand], None, base)
-                if single.joint or single.result is not None:
-                    step.result, step.joint = single.result, single.joint
+                step.result, step.joint = single.result, single.joint  # the single's fit
                 step.alone_rmse, step.alone_aic = [single.rmse], [single.aic]
                 out.append(step)
         return out
@@ -282,9 +287,10 @@ class Discoverer:
 
     def _names(self, step: _Step, base: _Base) -> bool:
         """Whether ``step`` names its effects: it removes at least ``min_improvement`` of the
-        held-out error above the noise floor, a tenth of the floor at least, improves the
-        information criterion by 10, and every effect in it is meaningful (no drift scales near
-        1, no fit against a bound); a pair also beats each of its members alone by 10. A missing
+        held-out error above the noise floor, a tenth of the floor at least (both on the error
+        it is judged on, see _judged), improves the information criterion by 10, every effect
+        in it is meaningful (no drift scales near 1, no fit against a bound) and its interval
+        excludes its null value; a pair also beats each of its members alone by 10. A missing
         effect that is really there explains most of what is left; one that stands in for
         something else explains part of it."""
         return (
