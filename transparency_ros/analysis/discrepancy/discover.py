@@ -82,6 +82,7 @@ class _Step:
     rmse: float
     aic: float
     gain: float  # share of the held-out error above the noise floor it removes
+    judged: tuple[float, float, float]  # (RMSE before, after, floor) the gain is judged on
     result: Any  # the least-squares fit behind the parameters
     meaningful: bool
     joint: bool = False  # ``result`` fitted every parameter, not only those of ``added``
@@ -253,29 +254,27 @@ class Discoverer:
         size = _total(params[: len(effects)]) + sum(
             parameter_count(a, p) for a, p in zip(added, params[len(effects) :], strict=True)
         )
+        before, after, floor = judged = self._judged(added, base, err)
         return _Step(
             added=added,
             params=params,
             err=err,
             rmse=err_rmse,
             aic=aic(err, size),
-            gain=self._gain(added, base, err),
+            # the share of the error above the floor it removes (of one sensor's: _judged)
+            gain=float((before - after) / max(before - floor, 1e-12)),
+            judged=judged,
             result=result,
             meaningful=all(
                 a.meaningful(p) for a, p in zip(added, params[len(effects) :], strict=True)
             ),
         )
 
-    def _gain(self, added: list[Any], base: _Base, err: FloatArray) -> float:
-        """The share of the held-out error above the noise floor that ``added`` removes; for
-        effects of one sensor's readings (``sensor_scope`` of the problem), and when only one
-        sensor's error is left above its floor (``leftover_scope``), of that sensor's error
-        above its own floor."""
-        before, after, floor = self._judged(added, base, err)
-        return float((before - after) / max(before - floor, 1e-12))
-
     def _judged(self, added: list[Any], base: _Base, err: FloatArray) -> tuple[float, float, float]:
-        """(RMSE before, after, floor) of the held-out error ``added`` is judged on."""
+        """(RMSE before, after, floor) of the held-out error ``added`` is judged on: all of
+        it; for effects of one sensor's readings (``sensor_scope`` of the problem), and when
+        only one sensor's error is left above its floor (``leftover_scope``), that sensor's
+        error and its own floor."""
         scope = getattr(self.problem, "sensor_scope", lambda _a: None)(added)
         if scope is None and base.rmse <= SIGNIFICANT * base.floor:
             # the pooled error is near its floor: what is left is one sensor's, judged there
@@ -296,15 +295,11 @@ class Discoverer:
         return (
             step.meaningful
             and not self._null_inside(step)
-            and self._removes_a_tenth(step, base)
+            and step.judged[0] - step.judged[1] >= 0.1 * step.judged[2]
             and step.gain >= self.min_improvement
             and step.aic < base.aic - 10
             and all(step.aic < a - 10 for a in step.alone_aic)
         )
-
-    def _removes_a_tenth(self, step: _Step, base: _Base) -> bool:
-        before, after, floor = self._judged(step.added, base, step.err)
-        return before - after >= 0.1 * floor
 
     @staticmethod
     def _null_inside(step: _Step) -> bool:
@@ -409,7 +404,7 @@ class Discoverer:
             else [(float(v), float(v)) for v in x]  # set from the joint fit afterwards
         )
         together = [a.name for a in step.added if a is not cand]
-        judged_before, judged_after, judged_floor = self._judged(step.added, base, step.err)
+        judged_before, judged_after, judged_floor = step.judged
         judged = (
             f"; judged on the encoder: {judged_before:.4g} -> {judged_after:.4g} rad "
             f"(its floor {judged_floor:.3g} rad)"

@@ -223,12 +223,7 @@ class DropProblem:
         # what the recordings predict: the torque that held the arm off theta_d before contact
         # (see expected; in the rig's theta sense) and the shuttle's weight on the arm
         self._held_nm = -float(
-            np.median(
-                [
-                    t.strike_sign * MODEL_STRIKE_SIGN * t.k_s * (t.theta_d - rest_position(t))
-                    for t in trials
-                ]
-            )
+            np.median([t.sense * t.k_s * (t.theta_d - rest_position(t)) for t in trials])
         )
         self.declared_weight_nm = float(np.mean([t.mass_kg * GRAVITY * t.arm_m for t in trials]))
 
@@ -245,7 +240,7 @@ class DropProblem:
             viscous_nms_per_rad=ones * self.model.viscous_nms_per_rad[a],
             coulomb_nm=ones * self.model.coulomb_nm[a],
             static_nm=ones * self.model.coulomb_nm[a],
-            sense=np.array([float(t.strike_sign * MODEL_STRIKE_SIGN) for t in trials]),
+            sense=np.array([t.sense for t in trials]),
         )
         for effect, p in zip(effects, params, strict=True):
             ph = effect.apply(ph, p, self)
@@ -375,10 +370,10 @@ class DropProblem:
 
     def sensor_scope(self, effects: Sequence[DropEffect]) -> tuple[BoolArray, float] | None:
         """For effects that all act on the encoder's readings alone (its lattice, its lateness):
-        the held-out error elements of the encoder and its noise floor, on which they are
-        judged. Such an effect cannot touch the heights' or the fall's residual; judged on
-        all of it, a coarse encoder went unnamed beside 0.3 mrad the heights kept for another
-        reason (a friction hump the encoder's 3 mrad lattice hides)."""
+        the held-out error elements of the encoder and its own floor (see leftover_scope), on
+        which they are judged. Such an effect cannot touch the heights' or the fall's residual;
+        judged on all of it, a coarse encoder went unnamed beside 0.3 mrad the heights kept for
+        another reason (a friction hump the encoder's 3 mrad lattice hides)."""
         if not effects or any(e.sensor != "encoder" for e in effects):
             return None
         return self._encoder_elements, self._encoder_floor

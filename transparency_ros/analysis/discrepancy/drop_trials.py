@@ -22,11 +22,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 
 from transparency_ros.analysis.discrepancy.model import FloatArray
 from transparency_ros.bag.errors import BagReadError
-from transparency_ros.bag.reader import JointSeries, joint_series, open_bag, scalar_series
+from transparency_ros.bag.reader import joint_series, open_bag, scalar_series
 from transparency_ros.core.config import load_drop_test
 from transparency_ros.core.errors import ModelError
 
@@ -62,6 +61,12 @@ class DropTrial:
     strike_sign: int = MODEL_STRIKE_SIGN  # the rig's: q and theta_d above are mirrored if +1
     release_recorded: bool = True  # False: the recording starts during the fall
     notes: tuple[str, ...] = ()  # what was assumed or detected, in words a user can act on
+
+    @property
+    def sense(self) -> float:
+        """+1 where the trial is analysed as recorded, -1 where mirrored: what turns a torque
+        in the rig's theta sense into the model's."""
+        return float(self.strike_sign * MODEL_STRIKE_SIGN)
 
     @property
     def start_s(self) -> float:
@@ -122,7 +127,8 @@ def load_drop_trial(path: str | Path) -> DropTrial:
         )
     rest = float(np.median(q[t_q < contact - LEAD_S][-10:]))
     if theta_d is None:
-        theta_d = _setpoint_from_effort(states, keep, t0_ns, contact, numbers["transparency.k_s"])
+        effort = states.effort[keep]
+        theta_d = _setpoint_from_effort(t_q, q, effort, contact, numbers["transparency.k_s"])
         if theta_d is not None:
             notes.append(
                 "no /joint_commands: theta_d from the recorded drive torque at rest before "
@@ -258,14 +264,12 @@ def _release(
 
 
 def _setpoint_from_effort(
-    states: JointSeries, keep: npt.NDArray[np.bool_], t0_ns: int, contact: float, k_s: float
+    t_q: FloatArray, q: FloatArray, effort: FloatArray, contact: float, k_s: float
 ) -> float | None:
     """theta_d by the impedance law tau = k_s (theta_d - theta) from the last 50 ms before the
     impact piece's start, where the arm is at rest (the damping term is then nil); None when
     the recording has no efforts there or k_s is not positive."""
-    t = states.seconds(t0_ns)[keep]
-    effort, q = states.effort[keep], states.position[keep]
-    sel = (t < contact - LEAD_S) & (t >= contact - LEAD_S - 0.05) & np.isfinite(effort)
+    sel = (t_q < contact - LEAD_S) & (t_q >= contact - LEAD_S - 0.05) & np.isfinite(effort)
     if k_s <= 0 or np.count_nonzero(sel) < 5:
         return None
     return float(np.median(q[sel] + effort[sel] / k_s))
