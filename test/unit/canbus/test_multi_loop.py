@@ -68,7 +68,12 @@ def build(protocol: str, ids: list[int], buses: int = 1, policy: str = "all") ->
                 PhysicsParams.from_actuator(get_actuator("U10DD")), max_step_s=ROBOT_SIM_STEP_S
             )
             devices.append((physics, device))
-            core = DriverCore(DriverSettings(reply_silence_s=0.008))
+            # (the simulated motors answer from a thread of this test process, stalled with it
+            # under load: at 8 ms (4 cycles), a 279 ms stall of the whole suite's process ended
+            # with the loop's thread sending 3 requests before the motors' thread answered, a
+            # "silent" motor. A real motor does not stall with the host; 0.1 s, the driver's
+            # default, keeps that ordering from looking like silence)
+            core = DriverCore(DriverSettings(reply_silence_s=0.1))
             motors.append(Motor(f"j{motor_id}", host, core, bus=b))
         sims.append(SimulatedBus(devices, settings))
         opened.append(settings.open())
