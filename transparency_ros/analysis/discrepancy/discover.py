@@ -28,6 +28,7 @@ forced onto a label.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -304,9 +305,9 @@ class Discoverer:
     @staticmethod
     def _null_inside(step: _Step) -> bool:
         """Whether the 95 % interval of an added effect holds its value of no effect
-        (``null``: no backlash, no delay) for every parameter: the data do not tell it from
-        nothing, however much the fitted value removes. The fitted parameters of the added
-        effects are the last of the fit's."""
+        (``null``: no backlash, no delay; NaN: any value, cogging's phase) for every
+        parameter: the data do not tell it from nothing, however much the fitted value
+        removes. The fitted parameters of the added effects are the last of the fit's."""
         if step.result is None or getattr(step.result, "jac", None) is None:
             return False
         ci = interval(step.result, step.result.x)
@@ -319,7 +320,9 @@ class Discoverer:
             if (
                 null is not None
                 and own
-                and all(lo <= z <= hi for (lo, hi), z in zip(own, null, strict=True))
+                and all(
+                    math.isnan(z) or lo <= z <= hi for (lo, hi), z in zip(own, null, strict=True)
+                )
             ):
                 return True
         return False

@@ -210,7 +210,11 @@ class DropProblem:
         self._candidates = (
             list(candidates)
             if candidates is not None
-            else drop_library(mass, nominal.coulomb_nm[self.actuator])
+            else drop_library(
+                mass,
+                nominal.coulomb_nm[self.actuator],
+                float(np.mean([t.arm_inertia_kgm2 + t.mass_kg * t.arm_m**2 for t in trials])),
+            )
         )
         self.nominal = {
             k: v for k, v in nominal.as_dict().items() if k.startswith(f"{self.actuator}.")
@@ -357,16 +361,26 @@ class DropProblem:
 
     @cached_property
     def _encoder_floor(self) -> float:
-        # a count: the finest spacing of the values a trial read, or of its steps (a moving
-        # arm's successive samples are many counts apart, but steps differ by whole counts)
+        return max(self._sensor_noise[0], self.encoder_count / math.sqrt(12))
+
+    @cached_property
+    def position_span(self) -> float:
+        """The range of positions the fitting trials' compared readings visited [rad]."""
+        q = np.concatenate([q for _, q in self.fit.q])
+        return float(np.ptp(q)) if q.size else 0.0
+
+    @cached_property
+    def encoder_count(self) -> float:
+        """One count of the encoder [rad]: the finest spacing of the values a trial read, or of
+        its steps (a moving arm's successive samples are many counts apart, but steps differ
+        by whole counts); the median over the fitting trials (0: none seen)."""
         counts = []
         for t in self.fit_trials:
             steps = np.abs(np.diff(t.q))
             spacing = np.r_[np.diff(np.unique(t.q)), np.diff(np.unique(steps[steps > 1e-12]))]
             spacing = spacing[spacing > 1e-9]
             counts.append(float(np.min(spacing)) if spacing.size else 0.0)
-        count = float(np.median(counts)) if counts else 0.0
-        return max(self._sensor_noise[0], count / math.sqrt(12))
+        return float(np.median(counts)) if counts else 0.0
 
     def sensor_scope(self, effects: Sequence[DropEffect]) -> tuple[BoolArray, float] | None:
         """For effects that all act on the encoder's readings alone (its lattice, its lateness):

@@ -4,6 +4,7 @@ where its physics acts (see :mod:`transparency_ros.analysis.discrepancy.drop`)."
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -14,6 +15,15 @@ from transparency_ros.analysis.discrepancy.effects import drifted, pinned
 from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
 
 LOCAL_GRAVITY_SPREAD = 0.005  # of the weight: what local gravity may differ from the tool's g
+# cogging periods per output revolution tried: from where the positions the arm visited span
+# half a period (a wave any longer is monotonic there: a stiffer spring, or the constant torque
+# a friction law the model lacks leaves where the arm stops, fits it as well; 2 periods per
+# revolution took up a Stribeck hump on an independent rig) and 2 at least (1 is a weight's),
+# up to where a period spans COGGING_COUNTS encoder counts (a finer wave is not seen), at most
+MOST_COGGING_PERIODS = 400
+COGGING_COUNTS = 8
+COGGING_PROBE_NM = 0.01  # the wave's size the scan linearizes at
+COGGING_FINALISTS = 5  # periods of the linear scan simulated at their fitted sizes
 # an offset below this share of the Coulomb torque is where a friction law stops the arm
 FRICTION_BAND_SHARE = 0.1
 
@@ -145,6 +155,36 @@ class StructuralCompliance(DropEffect):
         return {"stiffness_n_per_m": float(10 ** p[0])}
 
 
+class HubArmCompliance(DropEffect):
+    """A torsional spring between the motor (its encoder) and the arm: a compliant shaft,
+    coupling or arm. The arm rings against the motor after the strike, which the encoder
+    sees. Its parameters: log10 of the stiffness [N m/rad] and the damping ratio of that ring
+    (motor against arm with the shuttle on it); reported with the frequency of the arm and the
+    shuttle on the spring with the motor held (what a tap test on a clamped hub measures)."""
+
+    def __init__(self, loaded_inertia_kgm2: float) -> None:
+        super().__init__(
+            "structural_compliance",
+            ("log10_hub_arm_stiffness_nm_per_rad", "damping_ratio"),
+            (1.0, 0.0),
+            (5.0, 0.5),
+        )
+        self.loaded_inertia_kgm2 = loaded_inertia_kgm2
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        return np.array([3.0, 0.05])
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, torsion_nm_per_rad=float(10 ** p[0]), torsion_damping_ratio=float(p[1]))
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        stiffness = float(10 ** p[0])
+        return {
+            "hub_arm_stiffness_nm_per_rad": stiffness,
+            "compliance_hz": math.sqrt(stiffness / self.loaded_inertia_kgm2) / (2 * math.pi),
+        }
+
+
 class DropQuantization(DropEffect):
     def __init__(self) -> None:
         super().__init__(
@@ -181,6 +221,95 @@ class DropOffset(DropEffect):
         return replace(ph, torque_offset_nm=float(p[0]) * np.asarray(ph.sense, dtype=float))
 
 
+class DropCogging(DropEffect):
+    """The motor's cogging: A sin(N theta + phase) in the rig's theta sense, at the motor's
+    true position. N (periods per output revolution) is a choice made from the data by
+    :meth:`scan`; A and the phase are fitted. Its null value is A = 0 (any phase)."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            "cogging",
+            ("amplitude_nm", "phase_rad"),
+            (0.0, -2 * math.pi),
+            (1.0, 2 * math.pi),
+            discrete_choices=1,
+            null=(0.0, math.nan),
+        )
+        self.periods = 0
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return _CoggingProbe().apply(ph, np.array([p[0], p[1], self.periods]), problem)
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        return {"periods_per_rev": float(self.periods)}
+
+    def scan(
+        self, problem: DropProblem, effects: Sequence[DropEffect], params: Sequence[FloatArray]
+    ) -> FloatArray:
+        """Choose N, and start A and the phase, from the fitting trials: for every N the
+        error's response to a small sine wave and a small cosine wave (simulated, all N in one
+        run), and the two waves' sizes that remove most of the error (linear least squares);
+        the N whose waves, simulated, leave the least error is kept."""
+        count = problem.encoder_count
+        finest = MOST_COGGING_PERIODS
+        if count > 0:
+            finest = min(finest, int(2 * math.pi / (COGGING_COUNTS * count)))
+        coarsest = max(2, math.ceil(math.pi / max(problem.position_span, 1e-9)))
+        periods = range(coarsest, max(finest, coarsest) + 1)
+        sets = [[*params, np.array([0.0, 0.0, 2.0])]]
+        for n in periods:
+            sets += [
+                [*params, np.array([COGGING_PROBE_NM, 0.0, n])],
+                [*params, np.array([COGGING_PROBE_NM, math.pi / 2, n])],
+            ]
+        # every N's two waves in one simulation: each set carries its own N
+        probe = [*effects, _CoggingProbe()]
+        errors = problem.error_sets(probe, sets, False)
+        base = errors[0]
+        linear: dict[int, tuple[float, FloatArray]] = {}
+        for k, n in enumerate(periods):
+            basis = np.stack([errors[1 + 2 * k] - base, errors[2 + 2 * k] - base], axis=1)
+            (a, b), *_ = np.linalg.lstsq(basis, -base, rcond=None)
+            removed = float(base @ base - np.sum((base + basis @ np.array([a, b])) ** 2))
+            a, b = a * COGGING_PROBE_NM, b * COGGING_PROBE_NM
+            size = min(math.hypot(a, b), self.upper[0])
+            linear[n] = (removed, np.array([size, math.atan2(b, a)]))
+        # the linear prediction errs where the wave moves the arm by a good part of its period:
+        # the best few and their neighbours (N is seen to within a period or two over a short
+        # swing) simulated at their sizes, the best kept
+        ranked = sorted(linear, key=lambda n: -linear[n][0])[:COGGING_FINALISTS]
+        # (each also at the probe's size: a wave the linear fit makes too large)
+        tried = [
+            (m, np.array([size, linear[m][1][1]]))
+            for m in sorted({m for n in ranked for m in range(n - 2, n + 3) if m in linear})
+            for size in {linear[m][1][0], min(linear[m][1][0], COGGING_PROBE_NM)}
+        ]
+        costs = [
+            float(np.sum(e**2))
+            for e in problem.error_sets(probe, [[*params, np.r_[x, m]] for m, x in tried], False)
+        ]
+        self.periods, start = tried[int(np.argmin(costs))]
+        return start
+
+
+class _CoggingProbe(DropEffect):
+    """Cogging of any N for :meth:`DropCogging.scan`: parameters (A, phase, N). A sin(N theta
+    + phi) in the rig's sense is A sin(N q + sense phi) in the model's (q = sense theta, and
+    torques alike)."""
+
+    def __init__(self) -> None:
+        super().__init__("cogging", ("amplitude_nm", "phase_rad", "periods_per_rev"), (), ())
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        sense = np.asarray(ph.sense, dtype=float)
+        return replace(
+            ph,
+            cogging_nm=float(p[0]),
+            cogging_periods=float(p[2]),
+            cogging_phase_rad=sense * float(p[1]),
+        )
+
+
 class DeclaredWeight(DropEffect):
     """The shuttle's weight on the arm, m_s g r cos(theta), while they touch: its size is what
     the recording declares (shuttle mass and arm length in its custom_data, the tool's g), not
@@ -206,7 +335,11 @@ class DeclaredWeight(DropEffect):
         return {"mgl_uncertainty_nm": float(LOCAL_GRAVITY_SPREAD * p[0])}
 
 
-def drop_library(shuttle_mass_kg: float, coulomb_nm: float) -> list[DropEffect]:
+def drop_library(
+    shuttle_mass_kg: float, coulomb_nm: float, loaded_inertia_kgm2: float
+) -> list[DropEffect]:
+    """The candidates (``loaded_inertia_kgm2``: the arm's with the shuttle on it, J_a + m r^2,
+    for the frequency a torsional compliance is reported at)."""
     return [
         DropDrift(),
         DropOffset(coulomb_nm),
@@ -215,9 +348,11 @@ def drop_library(shuttle_mass_kg: float, coulomb_nm: float) -> list[DropEffect]:
         SetPhysics("restitution", "coefficient", 0.0, 0.95, "restitution"),
         ImpactSpeedLoss(shuttle_mass_kg),
         StructuralCompliance(),
+        HubArmCompliance(loaded_inertia_kgm2),
         SetPhysics("backlash", "backlash_rad", 0.0, 0.05, "backlash_rad"),
         SetPhysics("sensor_delay", "delay_s", 0.0, 0.02, "delay_s", sensor="encoder"),
         DropQuantization(),
         # the drive clips its impedance torque (a current limit); the offset is added after it
         SetPhysics("torque_saturation", "limit_nm", 0.02, 3.0, "torque_limit_nm", null=None),
+        DropCogging(),
     ]

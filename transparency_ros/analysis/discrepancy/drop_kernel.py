@@ -17,7 +17,10 @@ which value):
   bouncing: the shuttle stays on the arm), and the rest of the step is integrated from the new
   velocities; up to four collisions per step;
 * with a finite contact stiffness the contact is a spring-damper instead (damped for e);
-* the shuttle's weight loads the arm while they touch; the controller sees the encoder's lattice.
+* the shuttle's weight loads the arm while they touch; the controller sees the encoder's lattice;
+* the motor's cogging, a wave in its true position, adds to the drive's torque;
+* a torsional spring (and damper) between motor and arm makes them two bodies (a compliant
+  hub, shaft or arm): the encoder reads the motor's side.
 """
 
 from __future__ import annotations
@@ -61,6 +64,11 @@ COLUMNS = (
     "substeps",  # integration steps per output step
     "contact_substeps",  # the same while a contact spring is (about to be) compressed
     "limit",  # the drive's impedance torque is clipped here [N m] (inf: no saturation)
+    "cogging",  # the motor's cogging torque A sin(N q + phase) at its true position: A [N m]
+    "cogging_periods",  # N: periods per revolution of the output
+    "cogging_phase",  # phase [rad], in the model's sense of q
+    "torsion",  # a torsional spring between motor and arm [N m/rad] (0: rigid)
+    "torsion_damping",  # its damper [N m s/rad]
 )
 (
     MASS,
@@ -86,6 +94,11 @@ COLUMNS = (
     SUBSTEPS,
     CONTACT_SUBSTEPS,
     LIMIT,
+    COGGING,
+    COGGING_PERIODS,
+    COGGING_PHASE,
+    TORSION,
+    TORSION_DAMPING,
 ) = range(len(COLUMNS))
 
 
@@ -145,11 +158,15 @@ def sense(q: float, step: float) -> float:
 def drive_torque(row: Any, q: float, w: float, dt: float) -> float:
     """The motor's torque at motor position ``q`` (speed ``w``): the impedance at the step's
     midpoint (predicted: held at the step's start it would lag by half a step, a steady error
-    in the swing) on the sensed position, clipped at the drive's limit, then the offset (which
-    does not pass through the controller)."""
+    in the swing) on the sensed position, clipped at the drive's limit, then the offset and the
+    cogging at the motor's true position (neither passes through the controller)."""
     impedance = row[K_S] * (row[THETA_D] - sense(q, row[ENCODER_STEP]) - 0.5 * w * dt)
     limit = row[LIMIT]
-    return float(min(max(impedance, -limit), limit) + row[OFFSET])
+    torque = min(max(impedance, -limit), limit) + row[OFFSET]
+    if row[COGGING] != 0.0:
+        wave = row[COGGING_PERIODS] * (q + 0.5 * w * dt) + row[COGGING_PHASE]
+        torque += row[COGGING] * math.sin(wave)
+    return float(torque)
 
 
 # the state of one row, stepped in place: motor and arm (load side) angle and speed, shuttle
@@ -164,8 +181,9 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
     for i in numba.prange(out_q.shape[0]):
         row = p[i]
         s = np.empty(8)
-        # with backlash the arm starts anywhere in the dead band: free until the gap closes
-        rigid = 1.0 if row[BACKLASH] == 0.0 else 0.0
+        # with backlash the arm starts anywhere in the dead band: free until the gap closes;
+        # a torsional spring joins them always (never one body)
+        rigid = 1.0 if row[BACKLASH] == 0.0 and row[TORSION] == 0.0 else 0.0
         s[QM], s[WM], s[QL], s[WL] = row[Q0], 0.0, row[Q0], 0.0
         s[Y], s[V], s[GLUED], s[ENGAGED] = row[Y0], row[V0], 0.0, rigid
         spring = math.isfinite(row[STIFFNESS])
@@ -186,8 +204,15 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
                 joint_step(row, s, drive, load, h)
                 # the shuttle
                 if s[GLUED]:
+                    v_start = s[V]
                     s[Y] = row[ARM] * math.sin(s[QL])
                     s[V] = row[ARM] * math.cos(s[QL]) * s[WL]
+                    # the arm can only push: where it would have to pull the shuttle down (the
+                    # tip falling away faster than the shuttle can, a compliant arm ringing
+                    # or a motor running ahead), the shuttle flies free from here
+                    push = row[MASS] * ((s[V] - v_start) / h + GRAVITY) + row[RAIL] * sign(v_start)
+                    if push < 0.0:
+                        s[GLUED], s[V] = 0.0, v_start + acc_y * h
                     continue
                 s[Y] += (s[V] + 0.5 * acc_y * h) * h  # exact for the step's acceleration
                 s[V] += acc_y * h
@@ -228,11 +253,21 @@ def forces(row: Any, s: Any, dt: float) -> tuple[float, float, float]:
 @jit
 def joint_step(row: Any, s: Any, drive: float, load: float, dt: float) -> None:
     """Motor and arm over one step: one body while the motor pushes the arm; with backlash
-    each on its own once it would pull, until the gap closes again (momentum kept)."""
+    each on its own once it would pull, until the gap closes again (momentum kept); with a
+    torsional spring always each on its own, joined by the spring."""
     fr = (row[VISCOUS], row[COULOMB], row[STATIC])
     j_r = row[ROTOR]
     riding = row[MASS] * (row[ARM] * math.cos(s[QL])) ** 2 if s[GLUED] else 0.0
     j_load = row[ARM_INERTIA] + riding  # m_s r^2 cos^2 q while the shuttle rides the tip
+    if row[TORSION] > 0.0:
+        # two bodies on a spring: the motor (friction, drive, encoder) and the arm
+        coupling = row[TORSION] * (s[QL] - s[QM]) + row[TORSION_DAMPING] * (s[WL] - s[WM])
+        w_motor, mean_motor = friction_step(s[WM], j_r, drive + coupling, dt, fr)
+        s[WL] += (load - coupling) / j_load * dt
+        s[QL] += s[WL] * dt  # (semi-implicit: the new speed)
+        s[QM] += mean_motor * dt
+        s[WM] = w_motor
+        return
     w_joint, mean_joint = friction_step(s[WM], j_r + j_load, drive + load, dt, fr)
     half = row[BACKLASH] / 2
     pull = j_load * (w_joint - s[WM]) / dt - load  # what the motor would exert on the arm

@@ -31,6 +31,7 @@ STEP_S = 1e-4
 SUBSTEPS = 4
 SPRING_SUBSTEPS = 10  # the contact's onset and end fall within a step
 OMEGA_STEP = 0.025  # radians of the contact spring's oscillation per step
+TORSION_STEP = 0.15  # radians of a torsional spring's oscillation per step
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,14 @@ class DropPhysics:
     delay_s: FloatArray | float = 0.0
     encoder_step_rad: FloatArray | float = 0.0
     torque_limit_nm: FloatArray | float = math.inf  # the drive's impedance torque clipped
+    # the motor's cogging, A sin(N q + phase) in the model's sense of q
+    cogging_nm: FloatArray | float = 0.0
+    cogging_periods: FloatArray | float = 0.0
+    cogging_phase_rad: FloatArray | float = 0.0
+    # a torsional spring between motor and arm (0: rigid) and the damping ratio of their mode
+    # with the shuttle on the arm
+    torsion_nm_per_rad: FloatArray | float = 0.0
+    torsion_damping_ratio: FloatArray | float = 0.0
     # +1 where the trial is analysed as recorded, -1 where mirrored (the rig turns positive):
     # what turns a torque in the rig's theta sense into the model's (not integrated)
     sense: FloatArray | float = 1.0
@@ -151,6 +160,22 @@ class DropSimulator:
         ) ** 2
         omega = np.sqrt(np.where(np.isfinite(stiffness), stiffness, 0.0) * (1 / m + 1 / tip_mass))
         contact_substeps = np.maximum(SPRING_SUBSTEPS, np.ceil(omega * STEP_S / OMEGA_STEP))
+        # a torsional spring: its damper from the ratio of the mode the encoder sees after the
+        # strike, motor against arm with the shuttle on it (J_a + m r^2); steps fine enough for
+        # that mode (TORSION_STEP of its oscillation a step) and stable without the shuttle
+        # (1 radian a step)
+        torsion = np.asarray(ph.torsion_nm_per_rad, dtype=float)
+        arm_inertia = np.tile(self.arm_inertia, tiles)
+        loaded = arm_inertia + m * np.tile(self.arm, tiles) ** 2
+        reduced = ph.rotor_inertia_kgm2 * loaded / (ph.rotor_inertia_kgm2 + loaded)
+        torsion_damping = 2 * ph.torsion_damping_ratio * np.sqrt(torsion * reduced)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inverse = 1 / ph.rotor_inertia_kgm2
+            mode = np.sqrt(torsion * (inverse + 1 / loaded)) / TORSION_STEP
+            free = np.sqrt(torsion * (inverse + 1 / arm_inertia))
+        fine = np.where(torsion > 0, np.ceil(np.maximum(mode, free) * STEP_S), 0.0)
+        substeps = np.maximum(float(SUBSTEPS), fine)
+        contact_substeps = np.maximum(contact_substeps, substeps)
         columns = [
             m,
             *(np.tile(a, tiles) for a in (self.arm, self.k_s, self.theta_d, self.arm_inertia)),
@@ -167,9 +192,14 @@ class DropSimulator:
             ph.rail_friction_n,
             ph.backlash_rad,
             ph.encoder_step_rad,
-            np.full(n, SUBSTEPS),
+            substeps,
             contact_substeps,
             ph.torque_limit_nm,
+            ph.cogging_nm,
+            ph.cogging_periods,
+            ph.cogging_phase_rad,
+            torsion,
+            torsion_damping,
         ]
         out_q = np.empty((n, steps))
         out_y = np.empty((n, steps))

@@ -31,7 +31,11 @@ def fit_candidate(
 ) -> tuple[FloatArray, Any]:
     """The parameters of ``new`` added to ``effects`` (theirs held) on the fitting trials:
     (parameters, least-squares result); the result is None for an effect with nothing to fit."""
-    x0 = np.clip(problem.initial(new), new.lower, new.upper)
+    # an effect with a choice to make from the data (cogging's period) scans for it against
+    # the effects found so far
+    scan = getattr(new, "scan", None)
+    start = problem.initial(new) if scan is None else scan(problem, effects, params)
+    x0 = np.clip(start, new.lower, new.upper)
     if not new.fittable:
         return x0, None
 
