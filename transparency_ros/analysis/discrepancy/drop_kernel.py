@@ -199,6 +199,8 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
                     n_sub = int(row[CONTACT_SUBSTEPS])
             h = dt / n_sub
             for _ in range(n_sub):
+                if s[GLUED] and row[TORSION] > 0.0 and leaves(row, s):
+                    s[GLUED] = 0.0
                 drive, load, acc_y = forces(row, s, h)
                 w_start = (s[WM], s[WL])
                 joint_step(row, s, drive, load, h)
@@ -207,11 +209,10 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
                     v_start = s[V]
                     s[Y] = row[ARM] * math.sin(s[QL])
                     s[V] = row[ARM] * math.cos(s[QL]) * s[WL]
-                    # the arm can only push: where it would have to pull the shuttle down (the
-                    # tip falling away faster than the shuttle can, a compliant arm ringing
-                    # or a motor running ahead), the shuttle flies free from here
+                    # the arm can only push: where it had to pull the shuttle down (a motor
+                    # running ahead in a dead band), the shuttle flies free from here
                     push = row[MASS] * ((s[V] - v_start) / h + GRAVITY) + row[RAIL] * sign(v_start)
-                    if push < 0.0:
+                    if push < 0.0 and row[TORSION] == 0.0:
                         s[GLUED], s[V] = 0.0, v_start + acc_y * h
                     continue
                 s[Y] += (s[V] + 0.5 * acc_y * h) * h  # exact for the step's acceleration
@@ -220,6 +221,18 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
                     # the motor's and the arm's mean acceleration over the step
                     acc = ((s[WM] - w_start[0]) / h, (s[WL] - w_start[1]) / h)
                     strikes(row, s, (acc_y, *acc), h)
+
+
+@jit
+def leaves(row: Any, s: Any) -> bool:
+    """Whether an arm on a torsional spring, without the shuttle, would fall away from it
+    faster than the shuttle can follow (gravity and the rail): decided before the step, so
+    that the step is taken without the shuttle's inertia (after it, the separation's error
+    grew with the step: first order, one per ring of the spring)."""
+    coupling = row[TORSION] * (s[QL] - s[QM]) + row[TORSION_DAMPING] * (s[WL] - s[WM])
+    arm = -coupling / row[ARM_INERTIA]
+    tip = row[ARM] * (math.cos(s[QL]) * arm - math.sin(s[QL]) * s[WL] * s[WL])
+    return bool(tip < -GRAVITY - row[RAIL] * sign(s[V]) / row[MASS])
 
 
 @jit
@@ -262,10 +275,12 @@ def joint_step(row: Any, s: Any, drive: float, load: float, dt: float) -> None:
     if row[TORSION] > 0.0:
         # two bodies on a spring: the motor (friction, drive, encoder) and the arm
         coupling = row[TORSION] * (s[QL] - s[QM]) + row[TORSION_DAMPING] * (s[WL] - s[WM])
-        w_motor, mean_motor = friction_step(s[WM], j_r, drive + coupling, dt, fr)
+        w_motor, _ = friction_step(s[WM], j_r, drive + coupling, dt, fr)
         s[WL] += (load - coupling) / j_load * dt
-        s[QL] += s[WL] * dt  # (semi-implicit: the new speed)
-        s[QM] += mean_motor * dt
+        # both moved at their new speeds (semi-implicit Euler: the spring's energy stays
+        # bounded; moved at their mean speeds, a stiff spring's ring grew without bound)
+        s[QL] += s[WL] * dt
+        s[QM] += w_motor * dt
         s[WM] = w_motor
         return
     w_joint, mean_joint = friction_step(s[WM], j_r + j_load, drive + load, dt, fr)
@@ -344,7 +359,10 @@ def strikes(row: Any, s: Any, acc: tuple[float, float, float], dt: float) -> Non
             s[QM], s[WM] = qm_c + mean * tau, w_end
             acc_m = (w_end - w_new) / tau if tau > 0.0 else acc_m
         else:
-            w_end = w_new + load_after / j_after * tau
+            # the arm on its own (a dead band, or a spring to the motor: its pull, the
+            # motor's state at the step's end)
+            spring = row[TORSION] * (ql_c - s[QM]) + row[TORSION_DAMPING] * (w_new - s[WM])
+            w_end = w_new + (load_after - spring) / j_after * tau
             mean = 0.5 * (w_new + w_end)
         acc_l = (w_end - w_new) / tau if tau > 0.0 else acc_l
         s[Y] = r * math.sin(ql_c) + (v_new + 0.5 * acc_y * tau) * tau

@@ -32,6 +32,7 @@ SUBSTEPS = 4
 SPRING_SUBSTEPS = 10  # the contact's onset and end fall within a step
 OMEGA_STEP = 0.025  # radians of the contact spring's oscillation per step
 TORSION_STEP = 0.15  # radians of a torsional spring's oscillation per step
+TORSION_STABLE = 0.5  # radians of its fastest oscillation (the arm without the shuttle)
 
 
 @dataclass(frozen=True)
@@ -163,7 +164,7 @@ class DropSimulator:
         # a torsional spring: its damper from the ratio of the mode the encoder sees after the
         # strike, motor against arm with the shuttle on it (J_a + m r^2); steps fine enough for
         # that mode (TORSION_STEP of its oscillation a step) and stable without the shuttle
-        # (1 radian a step)
+        # (TORSION_STABLE radians a step)
         torsion = np.asarray(ph.torsion_nm_per_rad, dtype=float)
         arm_inertia = np.tile(self.arm_inertia, tiles)
         loaded = arm_inertia + m * np.tile(self.arm, tiles) ** 2
@@ -172,8 +173,10 @@ class DropSimulator:
         with np.errstate(divide="ignore", invalid="ignore"):
             inverse = 1 / ph.rotor_inertia_kgm2
             mode = np.sqrt(torsion * (inverse + 1 / loaded)) / TORSION_STEP
-            free = np.sqrt(torsion * (inverse + 1 / arm_inertia))
-        fine = np.where(torsion > 0, np.ceil(np.maximum(mode, free) * STEP_S), 0.0)
+            free = np.sqrt(torsion * (inverse + 1 / arm_inertia)) / TORSION_STABLE
+            # (and its damper, explicit: its decay rate times the step below 1)
+            decay = torsion_damping * (inverse + 1 / arm_inertia)
+        fine = np.where(torsion > 0, np.ceil(np.maximum.reduce([mode, free, decay]) * STEP_S), 0.0)
         substeps = np.maximum(float(SUBSTEPS), fine)
         contact_substeps = np.maximum(contact_substeps, substeps)
         columns = [
