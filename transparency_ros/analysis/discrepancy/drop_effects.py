@@ -238,7 +238,7 @@ class DropCogging(DropEffect):
         self.periods = 0
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return _CoggingProbe().apply(ph, np.array([p[0], p[1], self.periods]), problem)
+        return with_cogging(ph, float(p[0]), float(p[1]), self.periods)
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {"periods_per_rev": float(self.periods)}
@@ -256,7 +256,7 @@ class DropCogging(DropEffect):
             finest = min(finest, int(2 * math.pi / (COGGING_COUNTS * count)))
         coarsest = max(2, math.ceil(math.pi / max(problem.position_span, 1e-9)))
         periods = range(coarsest, max(finest, coarsest) + 1)
-        sets = [[*params, np.array([0.0, 0.0, 2.0])]]
+        sets = [[*params, np.array([0.0, 0.0, coarsest])]]  # (no wave: the error as it is)
         for n in periods:
             sets += [
                 [*params, np.array([COGGING_PROBE_NM, 0.0, n])],
@@ -293,21 +293,22 @@ class DropCogging(DropEffect):
 
 
 class _CoggingProbe(DropEffect):
-    """Cogging of any N for :meth:`DropCogging.scan`: parameters (A, phase, N). A sin(N theta
-    + phi) in the rig's sense is A sin(N q + sense phi) in the model's (q = sense theta, and
-    torques alike)."""
+    """Cogging of any N for :meth:`DropCogging.scan`: parameters (A, phase, N)."""
 
     def __init__(self) -> None:
         super().__init__("cogging", ("amplitude_nm", "phase_rad", "periods_per_rev"), (), ())
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        sense = np.asarray(ph.sense, dtype=float)
-        return replace(
-            ph,
-            cogging_nm=float(p[0]),
-            cogging_periods=float(p[2]),
-            cogging_phase_rad=sense * float(p[1]),
-        )
+        return with_cogging(ph, float(p[0]), float(p[1]), float(p[2]))
+
+
+def with_cogging(ph: DropPhysics, amplitude: float, phase: float, periods: float) -> DropPhysics:
+    """``ph`` with A sin(N theta + phi) in the rig's sense: A sin(N q + sense phi) in the
+    model's (q = sense theta, and torques alike)."""
+    sense = np.asarray(ph.sense, dtype=float)
+    return replace(
+        ph, cogging_nm=amplitude, cogging_periods=periods, cogging_phase_rad=sense * phase
+    )
 
 
 class DeclaredWeight(DropEffect):

@@ -211,9 +211,10 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
                     s[V] = row[ARM] * math.cos(s[QL]) * s[WL]
                     # the arm can only push: where it had to pull the shuttle down (a motor
                     # running ahead in a dead band), the shuttle flies free from here
-                    push = row[MASS] * ((s[V] - v_start) / h + GRAVITY) + row[RAIL] * sign(v_start)
-                    if push < 0.0 and row[TORSION] == 0.0:
-                        s[GLUED], s[V] = 0.0, v_start + acc_y * h
+                    if row[TORSION] == 0.0:  # (on a spring: decided before the step)
+                        push = row[MASS] * ((s[V] - v_start) / h + GRAVITY)
+                        if push + row[RAIL] * sign(v_start) < 0.0:
+                            s[GLUED], s[V] = 0.0, v_start + acc_y * h
                     continue
                 s[Y] += (s[V] + 0.5 * acc_y * h) * h  # exact for the step's acceleration
                 s[V] += acc_y * h
@@ -224,13 +225,18 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
 
 
 @jit
+def spring_torque(row: Any, q_arm: float, q_motor: float, w_arm: float, w_motor: float) -> float:
+    """What a torsional spring between motor and arm exerts on the motor (the arm: minus it)."""
+    return float(row[TORSION] * (q_arm - q_motor) + row[TORSION_DAMPING] * (w_arm - w_motor))
+
+
+@jit
 def leaves(row: Any, s: Any) -> bool:
     """Whether an arm on a torsional spring, without the shuttle, would fall away from it
     faster than the shuttle can follow (gravity and the rail): decided before the step, so
     that the step is taken without the shuttle's inertia (after it, the separation's error
     grew with the step: first order, one per ring of the spring)."""
-    coupling = row[TORSION] * (s[QL] - s[QM]) + row[TORSION_DAMPING] * (s[WL] - s[WM])
-    arm = -coupling / row[ARM_INERTIA]
+    arm = -spring_torque(row, s[QL], s[QM], s[WL], s[WM]) / row[ARM_INERTIA]
     tip = row[ARM] * (math.cos(s[QL]) * arm - math.sin(s[QL]) * s[WL] * s[WL])
     return bool(tip < -GRAVITY - row[RAIL] * sign(s[V]) / row[MASS])
 
@@ -274,7 +280,7 @@ def joint_step(row: Any, s: Any, drive: float, load: float, dt: float) -> None:
     j_load = row[ARM_INERTIA] + riding  # m_s r^2 cos^2 q while the shuttle rides the tip
     if row[TORSION] > 0.0:
         # two bodies on a spring: the motor (friction, drive, encoder) and the arm
-        coupling = row[TORSION] * (s[QL] - s[QM]) + row[TORSION_DAMPING] * (s[WL] - s[WM])
+        coupling = spring_torque(row, s[QL], s[QM], s[WL], s[WM])
         w_motor, _ = friction_step(s[WM], j_r, drive + coupling, dt, fr)
         s[WL] += (load - coupling) / j_load * dt
         # both moved at their new speeds (semi-implicit Euler: the spring's energy stays
@@ -361,7 +367,7 @@ def strikes(row: Any, s: Any, acc: tuple[float, float, float], dt: float) -> Non
         else:
             # the arm on its own (a dead band, or a spring to the motor: its pull, the
             # motor's state at the step's end)
-            spring = row[TORSION] * (ql_c - s[QM]) + row[TORSION_DAMPING] * (w_new - s[WM])
+            spring = spring_torque(row, ql_c, s[QM], w_new, s[WM])
             w_end = w_new + (load_after - spring) / j_after * tau
             mean = 0.5 * (w_new + w_end)
         acc_l = (w_end - w_new) / tau if tau > 0.0 else acc_l
