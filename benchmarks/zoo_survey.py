@@ -39,14 +39,19 @@ PLANT = REPO.parent / "shared" / "plants" / "drop_zoo.py"
 PARAMS: dict[str, list[tuple[str, str]]] = {
     "backlash": [("backlash_rad", "backlash_rad")],
     "sensor_delay": [("delay_s", "delay_s")],
-    "cogging": [("cogging_amplitude_nm", "amplitude_nm")],
+    "cogging": [
+        ("cogging_amplitude_nm", "amplitude_nm"),
+        ("cogging_periods_per_rev", "periods_per_rev"),
+    ],
+    "structural_compliance": [("compliance_hz", "compliance_hz")],
     "restitution": [("restitution_coefficient", "coefficient")],
     "torque_saturation": [("saturation_nm", "limit_nm")],
     "impact_speed_loss": [("rail_friction_n", "rail_friction_n")],
     "torque_offset": [("offset_nm", "offset_nm")],
 }
-# (the zoo's compliance is a hub-arm spring in Hz, the tool's a contact spring in N/m: not
-# compared.) A drifted term's ratio against the tool's scale of that term:
+# (the compliance's damping ratio is not compared: the zoo's ratio and the tool's are of
+# different rings, the arm on a held hub and the motor against the arm.) A drifted term's
+# ratio against the tool's scale of that term:
 DRIFT_SCALES = {
     "J_r": "reflected_inertia_scale",
     "b_v": "viscous_scale",

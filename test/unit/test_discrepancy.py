@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from transparency_ros.analysis.discrepancy.discover import discover
+from transparency_ros.analysis.discrepancy.drop_effects import HubArmCompliance
 from transparency_ros.analysis.discrepancy.effects import ParameterDrift, library
+from transparency_ros.analysis.discrepancy.findings import Finding, Report, parameters_text, widen
 from transparency_ros.analysis.discrepancy.model import Trial, load_nominal
 from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
@@ -209,3 +211,35 @@ def test_effects_that_explain_alike_are_alternatives_and_the_simpler_is_named(
     assert finding.effect == "payload_gravity"
     assert "cogging" in finding.alternatives
     assert "explained alike by" in finding.evidence
+
+
+def test_widen_logs_in_their_natural_unit_and_derived_values_follow() -> None:
+    """A logarithm's interval is widened by the model's share of its natural value, and a
+    value derived from it (a stiffness, its frequency) gets the interval its corners give."""
+    effect = HubArmCompliance(loaded_inertia_kgm2=0.01)
+    p = np.array([3.0, 0.05])
+    finding = Finding(
+        effect=effect.name,
+        parameters={"log10_hub_arm_stiffness_nm_per_rad": 3.0, "damping_ratio": 0.05}
+        | effect.extra_parameters(p),
+        confidence_interval={
+            "log10_hub_arm_stiffness_nm_per_rad": (2.99, 3.01),
+            "damping_ratio": (0.04, 0.06),
+        },
+        where={},
+        evidence="",
+        heldout_rmse_before=1.0,
+        heldout_rmse_after=0.5,
+    )
+    report = Report(nominal={}, split={}, findings=[finding], fitted=[(effect, p)])
+    widen(report, 0.2)
+    ci = report.findings[0].confidence_interval
+    lo, hi = ci["log10_hub_arm_stiffness_nm_per_rad"]
+    assert hi - 3.0 == pytest.approx(np.hypot(0.01, np.log10(1.2)))
+    assert lo == pytest.approx(3.0 - (hi - 3.0))
+    assert ci["damping_ratio"][1] - 0.05 == pytest.approx(np.hypot(0.01, 0.2 * 0.05))
+    assert ci["hub_arm_stiffness_nm_per_rad"] == pytest.approx((10**lo, 10**hi))
+    f_lo, f_hi = ci["compliance_hz"]
+    assert f_lo < effect.extra_parameters(p)["compliance_hz"] < f_hi
+    assert f_hi / f_lo == pytest.approx(np.sqrt(10 ** (hi - lo)))
+    assert "compliance_hz 50.33 (95 % " in parameters_text(report.findings[0])

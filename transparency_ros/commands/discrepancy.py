@@ -210,13 +210,15 @@ def run_discrepancy(args: argparse.Namespace) -> int:
     if args.json:
         strict_json.dump(report.as_dict(), sys.stdout)
         return 0
+    from transparency_ros.analysis.discrepancy.findings import parameters_text  # noqa: PLC0415
+
     print(f"nominal: {', '.join(f'{k} {v:g}' for k, v in report.nominal.items())}")
     print(f"held-out trials: {', '.join(report.split['heldout'])}")
     for note in report.notes:
         print(f"note: {note}")
     print(f"held-out simulation RMSE, nominal: {report.heldout_rmse_nominal:.4g} rad")
     for f in report.findings:
-        params = ", ".join(f"{k} {v:.4g}" for k, v in f.parameters.items())
+        params = parameters_text(f)
         print(
             f"found {f.effect}: {params}; where: {f.where['phase']} "
             f"({f.where['trial']} {f.where['window_s']} s); {f.evidence}"

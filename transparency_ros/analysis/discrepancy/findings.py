@@ -55,6 +55,17 @@ class Report:
         }
 
 
+def parameters_text(finding: Finding) -> str:
+    """A finding's values, each with its 95 % interval where it has one: 'delay_s 0.002
+    (95 % 0.0017-0.0023)'."""
+    parts = []
+    for name, value in finding.parameters.items():
+        lo, hi = finding.confidence_interval.get(name, (value, value))
+        spread = f" (95 % {lo:.3g} to {hi:.3g})" if lo < hi else ""
+        parts.append(f"{name} {value:.4g}{spread}")
+    return ", ".join(parts)
+
+
 def locate(problem: Problem, before: FloatArray, after: FloatArray) -> dict[str, Any]:
     """Where an effect acted: the motion phase whose held-out error it reduced most, and the
     trial and time window of the largest reduction."""
@@ -105,19 +116,46 @@ def widen(report: Report, share: float) -> None:
     """Each finding's intervals widened by the model's own error: a half-width of
     sqrt(h^2 + (share x)^2) for a fitted x of statistical half-width h. The fit's interval
     says what the noise allows; what the model still misses (a friction or contact law not
-    its own) biases every trial alike, which no interval from the same fit can show."""
-    if share <= 0:
-        return
-    for i, finding in enumerate(report.findings):
+    its own) biases every trial alike, which no interval from the same fit can show. A
+    parameter fitted as a logarithm (``log10_...``) is widened by the same share of its
+    natural value: log10(1 + share) in the log. Then the intervals of the values derived
+    from the fitted ones (``extra_parameters``: a stiffness and its frequency) follow from
+    the fitted ones' intervals, as the extremes over their corners."""
+    for i, (finding, (effect, p)) in enumerate(zip(report.findings, report.fitted, strict=True)):
         ci = {}
         for name, (lo, hi) in finding.confidence_interval.items():
             x = finding.parameters[name]
-            if lo == hi:  # nothing fitted: a declared or read-off value
+            if lo == hi or share <= 0:  # nothing fitted (a declared or read-off value)
                 ci[name] = (lo, hi)
                 continue
-            half = math.hypot((hi - lo) / 2, share * x)
+            model = math.log10(1 + share) if name.startswith("log10_") else share * x
+            half = math.hypot((hi - lo) / 2, model)
             ci[name] = (x - half, x + half)
+        ci |= derived_intervals(effect, p, ci)
         report.findings[i] = replace(finding, confidence_interval=ci)
+
+
+def derived_intervals(
+    effect: Any, p: FloatArray, ci: dict[str, tuple[float, float]]
+) -> dict[str, tuple[float, float]]:
+    """The intervals of an effect's derived values (``extra_parameters``): their extremes
+    over the corners of the fitted parameters' intervals, exact for values monotonic in each
+    parameter (a stiffness from its logarithm, a frequency from the stiffness)."""
+    names = list(effect.param_names)
+    if not names or any(n not in ci for n in names) or len(names) > 6:
+        return {}
+    corners = []
+    for k in range(2 ** len(names)):
+        x = np.array(p, dtype=float)
+        for j, n in enumerate(names):
+            x[j] = ci[n][(k >> j) & 1]
+        corners.append(effect.extra_parameters(x))
+    out = {}
+    for name in effect.extra_parameters(np.asarray(p, dtype=float)):
+        values = [c[name] for c in corners if np.isfinite(c.get(name, np.nan))]
+        if values and min(values) < max(values):  # (a constant is a choice, not a fit)
+            out[name] = (float(min(values)), float(max(values)))
+    return out
 
 
 def leftover(

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from transparency_ros.analysis.discrepancy.findings import Report
+from transparency_ros.analysis.discrepancy.findings import Report, parameters_text
 from transparency_ros.analysis.discrepancy.problem import Problem
 
 
@@ -57,7 +57,7 @@ def write_report(out: Path, problem: Problem, report: Report) -> list[Path]:
         "|---|---|---|---|---|",
     ]
     for i, f in enumerate(report.findings, 1):
-        params_text = ", ".join(f"{k} {v:.4g}" for k, v in f.parameters.items())
+        params_text = parameters_text(f)
         rows.append(
             f"| {i} | {f.effect} | {params_text} | {f.where['phase']} | "
             f"{f.heldout_rmse_before:.4g} → {f.heldout_rmse_after:.4g} |"
