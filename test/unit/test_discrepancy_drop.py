@@ -225,21 +225,60 @@ def test_the_cogging_scan_finds_a_waves_period_and_size(tmp_path: Path) -> None:
     not ours: the zoo survey, docs/discrepancy.md.)"""
     from transparency_ros.analysis.discrepancy.fitting import fit_candidate  # noqa: PLC0415
 
+    problem = _self_simulated(
+        tmp_path, cogging_nm=0.03, cogging_periods=70.0, cogging_phase_rad=0.8
+    )
+    cogging = next(c for c in problem.candidates() if c.name == "cogging")
+    x, _ = fit_candidate(problem, [], [], cogging)
+    assert abs(cogging.periods - 70) <= 2
+    assert x[0] == pytest.approx(0.03, rel=0.1)
+
+
+@pytest.mark.parametrize("start", [1.0, -0.4])
+def test_backlash_is_measured_with_where_the_arm_starts_in_its_band(
+    tmp_path: Path, start: float
+) -> None:
+    """Recordings from the tool's own simulation with a 0.02 rad dead band, the arm starting
+    on its far flank from the strike (the whole band to close) or inside it: the fit measures
+    the width within 10 % and the start within 0.15 of a half band (started in the middle,
+    the far flank's band came out twice as wide on the zoo)."""
+    from transparency_ros.analysis.discrepancy.fitting import fit_candidate  # noqa: PLC0415
+
+    problem = _self_simulated(tmp_path, backlash_rad=0.02, backlash_start=start)
+    backlash = next(c for c in problem.candidates() if c.name == "backlash")
+    x, _ = fit_candidate(problem, [], [], backlash)
+    assert x[0] == pytest.approx(0.02, rel=0.1)
+    assert x[1] == pytest.approx(start, abs=0.15)
+
+
+def test_where_an_arm_rests_in_its_band_does_not_move_the_falling_shuttle(
+    tmp_path: Path,
+) -> None:
+    """Heights are recorded above the arm's tip at rest, wherever in its band the arm rests:
+    before contact the simulated heights do not depend on the start, the motor's path after
+    it does."""
+    problem = _problem(write_drop_campaign(tmp_path / "c", 3, hidden=[], actuator="EC60"))
+    base = replace(problem.physics([], [], problem.held_trials), backlash_rad=0.03)
+    t, q_mid, y_mid = problem.held.sim.run(base)
+    _, q_far, y_far = problem.held.sim.run(replace(base, backlash_start=1.0))
+    before = t < 0.9 * min(tr.contact_s - tr.start_s for tr in problem.held_trials)
+    assert np.allclose(y_far[:, before], y_mid[:, before], atol=1e-12)
+    assert np.max(np.abs(q_far - q_mid)) > 1e-3
+
+
+def _self_simulated(tmp_path: Path, **changes: float) -> DropProblem:
+    """A campaign whose encoder and height readings are what the tool's own simulation gives
+    with ``changes`` to its physics, plus a little noise."""
     out = write_drop_campaign(tmp_path / "c", 3, hidden=[], actuator="EC60")
     problem = _problem(out)
     rng = np.random.default_rng(5)
     for s in (problem.fit, problem.held):
         ph = problem.physics([], [], s.trials)
-        t_sim, q_sim, y_sim = s.sim.run(
-            replace(ph, cogging_nm=0.03, cogging_periods=70.0, cogging_phase_rad=0.8)
-        )
+        t_sim, q_sim, y_sim = s.sim.run(replace(ph, **changes))
         for i, ((t_q, _q), (t_h, _h)) in enumerate(zip(s.q, s.h, strict=True)):
             s.q[i] = (t_q, np.interp(t_q, t_sim, q_sim[i]) + rng.normal(0, 2e-5, t_q.size))
             s.h[i] = (t_h, np.interp(t_h, t_sim, y_sim[i]) + rng.normal(0, 2e-5, t_h.size))
-    cogging = next(c for c in problem.candidates() if c.name == "cogging")
-    x, _ = fit_candidate(problem, [], [], cogging)
-    assert abs(cogging.periods - 70) <= 2
-    assert x[0] == pytest.approx(0.03, rel=0.1)
+    return problem
 
 
 # ------------------------------------------------------------------ rigs that are not ours

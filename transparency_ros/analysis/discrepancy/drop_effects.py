@@ -111,6 +111,33 @@ class SetPhysics(DropEffect):
         return replace(ph, **changes)
 
 
+class DropBacklash(DropEffect):
+    """A dead band between motor and arm: its width, and where the arm starts in it (arm -
+    motor in half bands: +1 on the far flank from the strike, the whole band to close before
+    the motor feels it; -1 on the flank the strike loads). Where an arm rests in its band is
+    not in a recording at rest; the strike and the rebound show it. Null: no band (any
+    start)."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            "backlash",
+            ("backlash_rad", "start_in_band"),
+            (0.0, -1.0),
+            (0.05, 1.0),
+            null=(0.0, math.nan),
+        )
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        return np.array([0.025, 0.0])
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, backlash_rad=float(p[0]), backlash_start=float(p[1]))
+
+    def meaningful(self, p: FloatArray) -> bool:
+        # (the arm on either flank is a start like any other: only the width can stand in)
+        return not pinned(p[:1], self.lower[:1], self.upper[:1])
+
+
 class DropStiction(DropEffect):
     def __init__(self) -> None:
         super().__init__("stiction", ("static_nm",), (0.0,), (2.0,))
@@ -350,7 +377,7 @@ def drop_library(
         ImpactSpeedLoss(shuttle_mass_kg),
         StructuralCompliance(),
         HubArmCompliance(loaded_inertia_kgm2),
-        SetPhysics("backlash", "backlash_rad", 0.0, 0.05, "backlash_rad"),
+        DropBacklash(),
         SetPhysics("sensor_delay", "delay_s", 0.0, 0.02, "delay_s", sensor="encoder"),
         DropQuantization(),
         # the drive clips its impedance torque (a current limit); the offset is added after it

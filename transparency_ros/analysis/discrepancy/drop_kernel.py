@@ -69,6 +69,8 @@ COLUMNS = (
     "cogging_phase",  # phase [rad], in the model's sense of q
     "torsion",  # a torsional spring between motor and arm [N m/rad] (0: rigid)
     "torsion_damping",  # its damper [N m s/rad]
+    "backlash_start",  # the arm's start in the dead band, arm - motor in half bands (+1: the
+    # far flank from the strike, the whole band to close; -1: on the flank the strike loads)
 )
 (
     MASS,
@@ -99,6 +101,7 @@ COLUMNS = (
     COGGING_PHASE,
     TORSION,
     TORSION_DAMPING,
+    BACKLASH_START,
 ) = range(len(COLUMNS))
 
 
@@ -184,12 +187,15 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
         # with backlash the arm starts anywhere in the dead band: free until the gap closes;
         # a torsional spring joins them always (never one body)
         rigid = 1.0 if row[BACKLASH] == 0.0 and row[TORSION] == 0.0 else 0.0
-        s[QM], s[WM], s[QL], s[WL] = row[Q0], 0.0, row[Q0], 0.0
-        s[Y], s[V], s[GLUED], s[ENGAGED] = row[Y0], row[V0], 0.0, rigid
+        # (the recorded heights are above the arm's tip at rest, wherever the arm rests)
+        arm0 = row[Q0] + row[BACKLASH_START] * row[BACKLASH] / 2
+        lift = row[ARM] * (math.sin(arm0) - math.sin(row[Q0]))
+        s[QM], s[WM], s[QL], s[WL] = row[Q0], 0.0, arm0, 0.0
+        s[Y], s[V], s[GLUED], s[ENGAGED] = row[Y0] + lift, row[V0], 0.0, rigid
         spring = math.isfinite(row[STIFFNESS])
         for k in range(steps):
             out_q[i, k] = s[QM]
-            out_y[i, k] = s[Y]
+            out_y[i, k] = s[Y] - lift
             n_sub = int(row[SUBSTEPS])
             if spring:
                 # the spring's finer steps while in contact, or about to be within this step

@@ -50,6 +50,9 @@ class DropPhysics:
     stiffness_n_per_m: FloatArray | float = math.inf  # contact spring (inf: instant collision)
     rail_friction_n: FloatArray | float = 0.0
     backlash_rad: FloatArray | float = 0.0
+    # where the arm starts in the dead band: arm - motor in half bands, +1 on the far flank
+    # from the strike (the whole band to close), -1 on the flank the strike loads
+    backlash_start: FloatArray | float = 0.0
     delay_s: FloatArray | float = 0.0
     encoder_step_rad: FloatArray | float = 0.0
     torque_limit_nm: FloatArray | float = math.inf  # the drive's impedance torque clipped
@@ -203,6 +206,7 @@ class DropSimulator:
             ph.cogging_phase_rad,
             torsion,
             torsion_damping,
+            ph.backlash_start,
         ]
         out_q = np.empty((n, steps))
         out_y = np.empty((n, steps))

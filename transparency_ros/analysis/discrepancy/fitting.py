@@ -112,7 +112,11 @@ def _bounded_least_squares(
         x_scale="jac",
         max_nfev=max_nfev,
     )
+    result.lower, result.upper = lower, upper  # (for the intervals: what is held at a bound)
     return result, float(np.sum(residual(x0) ** 2))
+
+
+BOUND_HELD = 1e-4  # a parameter this close to a bound (a share of its range) is held there
 
 
 def interval(result: Any, x: FloatArray) -> list[tuple[float, float]]:
@@ -121,16 +125,26 @@ def interval(result: Any, x: FloatArray) -> list[tuple[float, float]]:
     samples. The covariance is widened by the residual's own correlation, (1 + rho) / (1 - rho)
     for its lag-1 autocorrelation rho (an AR(1) error: n samples weigh as n (1 - rho) /
     (1 + rho) independent ones); with white-noise intervals, 4 in 9 zoo parameters were
-    covered."""
+    covered. A parameter the fit holds at a bound of its range (an arm on the flank of its dead
+    band) is taken as known there: the others' intervals are the ones given it (a Jacobian
+    at a bound says nothing of the side the fit could not go to)."""
     if result is None or result.jac is None:
         return [(float(v), float(v)) for v in x]
-    dof = max(1, result.fun.size - x.size)
-    sigma2 = 2 * result.cost / dof * correlation_inflation(result.fun, x.size)
+    free = np.ones(x.size, dtype=bool)
+    lower, upper = getattr(result, "lower", None), getattr(result, "upper", None)
+    if lower is not None and upper is not None and np.size(lower) == x.size:
+        # (the fit keeps x strictly inside: 1 - 2e-6 of a range of 2 is on the bound)
+        tol = BOUND_HELD * (upper - lower)
+        free = (x - lower > tol) & (upper - x > tol)
+    dof = max(1, result.fun.size - int(free.sum()))
+    sigma2 = 2 * result.cost / dof * correlation_inflation(result.fun, int(free.sum()))
+    jac = np.asarray(result.jac)[:, free]
     try:
-        cov = np.linalg.pinv(result.jac.T @ result.jac) * sigma2
+        cov = np.linalg.pinv(jac.T @ jac) * sigma2
     except np.linalg.LinAlgError:
         return [(math.nan, math.nan) for _ in x]
-    half = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
+    half = np.zeros(x.size)
+    half[free] = 1.96 * np.sqrt(np.clip(np.diag(cov), 0, None))
     return [(float(v - h), float(v + h)) for v, h in zip(x, half, strict=True)]
 
 
