@@ -57,7 +57,7 @@ class Report:
 
 def parameters_text(finding: Finding) -> str:
     """A finding's values, each with its 95 % interval where it has one: 'delay_s 0.002
-    (95 % 0.0017-0.0023)'."""
+    (95 % 0.0017 to 0.0023)'."""
     parts = []
     for name, value in finding.parameters.items():
         lo, hi = finding.confidence_interval.get(name, (value, value))
