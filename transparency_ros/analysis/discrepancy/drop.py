@@ -213,7 +213,7 @@ class DropProblem:
             else drop_library(
                 mass,
                 nominal.coulomb_nm[self.actuator],
-                float(np.mean([t.arm_inertia_kgm2 + t.mass_kg * t.arm_m**2 for t in trials])),
+                float(np.mean([t.loaded_inertia_kgm2 for t in trials])),
             )
         )
         self.nominal = {

@@ -135,6 +135,7 @@ class DropSimulator:
         self.mass = np.array([t.mass_kg for t in trials])
         self.arm = np.array([t.arm_m for t in trials])
         self.arm_inertia = np.array([t.arm_inertia_kgm2 for t in trials])
+        self.loaded_inertia = np.array([t.loaded_inertia_kgm2 for t in trials])
         self.k_s = np.array([t.k_s for t in trials])
         self.theta_d = np.array([t.theta_d for t in trials])
         self.q0 = np.array([rest_position(t) for t in trials])
@@ -159,9 +160,8 @@ class DropSimulator:
         # integrated in SUBSTEPS per output step; while a contact spring is compressed in
         # SPRING_SUBSTEPS, or more where its period needs them (250 steps a period; the shuttle
         # and the arm's tip on either side of the spring)
-        tip_mass = (np.tile(self.arm_inertia, tiles) + ph.rotor_inertia_kgm2) / np.tile(
-            self.arm, tiles
-        ) ** 2
+        arm_inertia = np.tile(self.arm_inertia, tiles)
+        tip_mass = (arm_inertia + ph.rotor_inertia_kgm2) / np.tile(self.arm, tiles) ** 2
         omega = np.sqrt(np.where(np.isfinite(stiffness), stiffness, 0.0) * (1 / m + 1 / tip_mass))
         contact_substeps = np.maximum(SPRING_SUBSTEPS, np.ceil(omega * STEP_S / OMEGA_STEP))
         # a torsional spring: its damper from the ratio of the mode the encoder sees after the
@@ -169,8 +169,7 @@ class DropSimulator:
         # that mode (TORSION_STEP of its oscillation a step) and stable without the shuttle
         # (TORSION_STABLE radians a step)
         torsion = np.asarray(ph.torsion_nm_per_rad, dtype=float)
-        arm_inertia = np.tile(self.arm_inertia, tiles)
-        loaded = arm_inertia + m * np.tile(self.arm, tiles) ** 2
+        loaded = np.tile(self.loaded_inertia, tiles)
         reduced = ph.rotor_inertia_kgm2 * loaded / (ph.rotor_inertia_kgm2 + loaded)
         torsion_damping = 2 * ph.torsion_damping_ratio * np.sqrt(torsion * reduced)
         with np.errstate(divide="ignore", invalid="ignore"):

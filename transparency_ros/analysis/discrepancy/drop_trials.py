@@ -69,6 +69,11 @@ class DropTrial:
         return float(self.strike_sign * MODEL_STRIKE_SIGN)
 
     @property
+    def loaded_inertia_kgm2(self) -> float:
+        """The arm's inertia with the shuttle on its tip, J_a + m r^2."""
+        return self.arm_inertia_kgm2 + self.mass_kg * self.arm_m**2
+
+    @property
     def start_s(self) -> float:
         return self.contact_s - LEAD_S
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from itertools import product
 from typing import Any
 
 import numpy as np
@@ -142,14 +143,9 @@ def derived_intervals(
     over the corners of the fitted parameters' intervals, exact for values monotonic in each
     parameter (a stiffness from its logarithm, a frequency from the stiffness)."""
     names = list(effect.param_names)
-    if not names or any(n not in ci for n in names) or len(names) > 6:
+    if not names or any(n not in ci for n in names):
         return {}
-    corners = []
-    for k in range(2 ** len(names)):
-        x = np.array(p, dtype=float)
-        for j, n in enumerate(names):
-            x[j] = ci[n][(k >> j) & 1]
-        corners.append(effect.extra_parameters(x))
+    corners = [effect.extra_parameters(np.array(x)) for x in product(*(ci[n] for n in names))]
     out = {}
     for name in effect.extra_parameters(np.asarray(p, dtype=float)):
         values = [c[name] for c in corners if np.isfinite(c.get(name, np.nan))]
