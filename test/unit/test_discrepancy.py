@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from transparency_ros.analysis.discrepancy.discover import discover
-from transparency_ros.analysis.discrepancy.drop_effects import HubArmCompliance
+from transparency_ros.analysis.discrepancy.drop_effects import DropRestitution, HubArmCompliance
 from transparency_ros.analysis.discrepancy.effects import ParameterDrift, library
 from transparency_ros.analysis.discrepancy.findings import Finding, Report, parameters_text, widen
 from transparency_ros.analysis.discrepancy.model import Trial, load_nominal
@@ -211,6 +211,37 @@ def test_effects_that_explain_alike_are_alternatives_and_the_simpler_is_named(
     assert finding.effect == "payload_gravity"
     assert "cogging" in finding.alternatives
     assert "explained alike by" in finding.evidence
+
+
+def test_a_rebound_yields_to_a_spring_that_explains_alike_and_not_to_a_worse_one() -> None:
+    """Between a contact's rebound and a hub-arm spring of as many parameters that explain the
+    held-out data within 5 %, the spring is named though the rebound fits a little better; a
+    rebound that fits clearly better (10 %) is named."""
+    from transparency_ros.analysis.discrepancy.discover import Discoverer, _Step  # noqa: PLC0415
+
+    rebound, spring = DropRestitution(), HubArmCompliance(loaded_inertia_kgm2=0.01)
+
+    def step(effect: object, rmse: float) -> _Step:
+        n = 10_000
+        return _Step(
+            added=[effect],
+            params=[np.array([0.5, 6.0])],
+            err=np.full(n, rmse),
+            rmse=rmse,
+            aic=n * np.log(rmse**2) + 4,
+            gain=0.9,
+            judged=(1.0, rmse, 0.1),
+            result=None,
+            meaningful=True,
+        )
+
+    chooser = Discoverer.__new__(Discoverer)
+    chooser.problem = object()
+    alike = chooser._choose([step(rebound, 1.00e-3), step(spring, 1.03e-3)])
+    assert alike is not None and alike.added == [spring]
+    assert alike.alternatives == ["restitution"]
+    better = chooser._choose([step(rebound, 1.00e-3), step(spring, 1.10e-3)])
+    assert better is not None and better.added == [rebound]
 
 
 def test_widen_logs_in_their_natural_unit_and_derived_values_follow() -> None:

@@ -174,6 +174,36 @@ def test_the_drop_integrator_has_converged_at_its_step(tmp_path: Path) -> None:
         assert float(np.sqrt(np.mean((a - b) ** 2))) < 0.5 * floor, case
 
 
+@pytest.mark.parametrize("actuator", ["U10DD", "U10GB"])
+def test_a_contact_spring_rebounds_with_its_restitution(tmp_path: Path, actuator: str) -> None:
+    """A stiff contact spring damped for e = 0.6 parts the shuttle and the struck tip at about
+    0.6 of the speed they met with (a little less: the hub's own damping, the impedance and
+    gravity act while they touch), on a direct drive whose tip is a tenth of the shuttle and
+    on a geared drive whose tip outweighs it. (Damped as if the tip did not move, the direct
+    drive's rebound would be 0.14.)"""
+    problem = _problem(write_drop_campaign(tmp_path / "c", 3, hidden=[], actuator=actuator))
+    sim = problem.held.sim
+    base = problem.physics([], [], problem.held_trials)
+    t, q, y = sim.run(replace(base, restitution=0.6, stiffness_n_per_m=1e7))
+    for i in range(len(problem.held_trials)):
+        r = float(sim.arm[i])
+        gap = y[i] - r * (np.sin(q[i]) - np.sin(sim.q0[i]))  # shuttle above the tip
+        first = int(np.argmax(gap < 0))
+        parted = first + int(np.argmax(gap[first:] > 0))
+        closing = (gap[first - 3] - gap[first - 1]) / (t[first - 1] - t[first - 3])
+        opening = (gap[parted + 2] - gap[parted]) / (t[parted + 2] - t[parted])
+        assert opening / closing == pytest.approx(0.6, abs=0.05)
+
+
+def test_a_delay_the_stamps_do_not_resolve_names_nothing() -> None:
+    """A sensor delay under a tenth of the interval between encoder readings is refused."""
+    from transparency_ros.analysis.discrepancy.drop_effects import SensorDelay  # noqa: PLC0415
+
+    delay = SensorDelay(sample_interval_s=1e-3)
+    assert not delay.meaningful(np.array([5e-5]))
+    assert delay.meaningful(np.array([2e-4]))
+
+
 def test_a_hub_arm_spring_that_lets_the_shuttle_go_converges_at_first_order(
     tmp_path: Path,
 ) -> None:

@@ -334,7 +334,9 @@ class Discoverer:
         one whose fitted values the recording itself predicts comes first (``expected`` of the
         problem: on a drop test, a payload of the shuttle's own m g r, which a constant offset
         imitates at small arm angles, or an offset that held the arm away from theta_d before
-        contact), and such a step is considered up to 10 % behind the best."""
+        contact), and such a step is considered up to 10 % behind the best. Then a candidate
+        that ``yields_to`` others (a rebound off the contact, which a ring of a compliant arm
+        also makes) comes after them."""
         if not steps:
             return None
         expected = getattr(self.problem, "expected", lambda _e, _p: False)
@@ -352,6 +354,7 @@ class Discoverer:
             key=lambda c: (
                 sum(parameter_count(a, p) for a, p in c.new()),
                 not all(expected(a, p) for a, p in c.new()),
+                max(getattr(a, "yields_to", 0) for a in c.added),
                 c.aic,
             ),
         )

@@ -214,6 +214,7 @@ class DropProblem:
                 mass,
                 nominal.coulomb_nm[self.actuator],
                 float(np.mean([t.loaded_inertia_kgm2 for t in trials])),
+                float(np.median(np.concatenate([np.diff(t.t_q) for t in trials]))),
             )
         )
         self.nominal = {

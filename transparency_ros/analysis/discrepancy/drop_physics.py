@@ -156,12 +156,17 @@ class DropSimulator:
         m = np.tile(self.mass, tiles)
         stiffness = np.asarray(ph.stiffness_n_per_m, dtype=float)
         zeta = restitution_damping_ratio(np.clip(ph.restitution, 1e-3, 0.999))
-        damping = np.where(np.isfinite(stiffness), 2 * zeta * np.sqrt(stiffness * m), 0.0)
         # integrated in SUBSTEPS per output step; while a contact spring is compressed in
         # SPRING_SUBSTEPS, or more where its period needs them (250 steps a period; the shuttle
         # and the arm's tip on either side of the spring)
         arm_inertia = np.tile(self.arm_inertia, tiles)
         tip_mass = (arm_inertia + ph.rotor_inertia_kgm2) / np.tile(self.arm, tiles) ** 2
+        # the contact's damper for e between the shuttle and the struck tip (their reduced
+        # mass: the tip of a direct drive is a tenth of the shuttle)
+        reduced_mass = m * tip_mass / (m + tip_mass)
+        damping = np.where(
+            np.isfinite(stiffness), 2 * zeta * np.sqrt(stiffness * reduced_mass), 0.0
+        )
         omega = np.sqrt(np.where(np.isfinite(stiffness), stiffness, 0.0) * (1 / m + 1 / tip_mass))
         contact_substeps = np.maximum(SPRING_SUBSTEPS, np.ceil(omega * STEP_S / OMEGA_STEP))
         # a torsional spring: its damper from the ratio of the mode the encoder sees after the
