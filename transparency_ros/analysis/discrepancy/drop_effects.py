@@ -47,6 +47,8 @@ class DropEffect:
     declared: bool = False
     # its parameters' values of no effect (none: it has no such value inside its range)
     null: tuple[float, ...] | None = None
+    # how many of its leading parameters may not sit at a bound (see meaningful; None: all)
+    bounded: int | None = None
 
     def initial(self, problem: DropProblem) -> FloatArray:
         return np.array([(lo + hi) / 2 for lo, hi in zip(self.lower, self.upper, strict=True)])
@@ -56,8 +58,11 @@ class DropEffect:
 
     def meaningful(self, p: FloatArray) -> bool:
         """A fit held at a bound of its plausible range (a restitution of 0.95, a 3 degree
-        backlash, a rigid contact) stands in for something else: it names nothing."""
-        return not pinned(p, self.lower, self.upper)
+        backlash, a rigid contact) stands in for something else: it names nothing. Only the
+        leading ``bounded`` parameters are checked where the others' bounds are answers (an
+        arm on a flank of its band, a contact as stiff as an instant collision)."""
+        k = len(self.lower) if self.bounded is None else self.bounded
+        return not pinned(p[:k], self.lower[:k], self.upper[:k])
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {}
@@ -86,7 +91,7 @@ class DropDrift(DropEffect):
         )
 
     def meaningful(self, p: FloatArray) -> bool:
-        return drifted(p) and not pinned(p, self.lower, self.upper)
+        return drifted(p) and super().meaningful(p)
 
 
 class SetPhysics(DropEffect):
@@ -139,6 +144,7 @@ class DropBacklash(DropEffect):
             (0.0, -1.0),
             (0.05, 1.0),
             null=(0.0, math.nan),
+            bounded=1,  # (the arm on either flank is a start like any other)
         )
 
     def initial(self, problem: DropProblem) -> FloatArray:
@@ -146,10 +152,6 @@ class DropBacklash(DropEffect):
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
         return replace(ph, backlash_rad=float(p[0]), backlash_start=float(p[1]))
-
-    def meaningful(self, p: FloatArray) -> bool:
-        # (the arm on either flank is a start like any other: only the width can stand in)
-        return not pinned(p[:1], self.lower[:1], self.upper[:1])
 
 
 class DropStiction(DropEffect):
@@ -221,6 +223,7 @@ class DropRestitution(DropEffect):
             (0.0, 4.5),
             (0.95, 7.5),
             null=(0.0, math.nan),
+            bounded=1,  # (a contact as stiff as the range allows: an instant collision)
         )
 
     def initial(self, problem: DropProblem) -> FloatArray:
@@ -228,10 +231,6 @@ class DropRestitution(DropEffect):
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
         return replace(ph, restitution=float(p[0]), stiffness_n_per_m=float(10 ** p[1]))
-
-    def meaningful(self, p: FloatArray) -> bool:
-        # (a contact as stiff as the range allows is an instant collision, a fine answer)
-        return not pinned(p[:1], self.lower[:1], self.upper[:1])
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {"contact_stiffness_n_per_m": float(10 ** p[1])}

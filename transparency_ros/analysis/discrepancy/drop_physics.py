@@ -164,10 +164,9 @@ class DropSimulator:
         # the contact's damper for e between the shuttle and the struck tip (their reduced
         # mass: the tip of a direct drive is a tenth of the shuttle)
         reduced_mass = m * tip_mass / (m + tip_mass)
-        damping = np.where(
-            np.isfinite(stiffness), 2 * zeta * np.sqrt(stiffness * reduced_mass), 0.0
-        )
-        omega = np.sqrt(np.where(np.isfinite(stiffness), stiffness, 0.0) * (1 / m + 1 / tip_mass))
+        contact = np.where(np.isfinite(stiffness), stiffness, 0.0)
+        damping = 2 * zeta * np.sqrt(contact * reduced_mass)
+        omega = np.sqrt(contact / reduced_mass)
         contact_substeps = np.maximum(SPRING_SUBSTEPS, np.ceil(omega * STEP_S / OMEGA_STEP))
         # a torsional spring: its damper from the ratio of the mode the encoder sees after the
         # strike, motor against arm with the shuttle on it (J_a + m r^2); steps fine enough for
