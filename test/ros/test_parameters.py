@@ -142,3 +142,33 @@ def test_an_integer_for_a_double_is_taken_as_ros_users_type_it(ros_context: Cont
         spinner.stop()
         probe.node.destroy_node()
     assert "Traceback" not in out, out
+
+
+@pytest.mark.parametrize("make", ["estimator", "behavior", "driver"])
+def test_a_refused_node_is_destroyed_before_the_error_leaves(
+    ros_context: Context, make: str
+) -> None:
+    """A constructor that refuses a parameter after Node.__init__ has made the node undoes it:
+    the half-built node (held here by the traceback) is destroyed, not left to the collector."""
+    from rclpy.exceptions import InvalidHandle  # noqa: PLC0415
+    from rclpy.parameter import Parameter  # noqa: PLC0415
+
+    from transparency_ros.core.errors import ConfigError  # noqa: PLC0415
+    from transparency_ros.ros.actuator_driver.node import ActuatorDriverNode  # noqa: PLC0415
+    from transparency_ros.ros.contact_estimator import ContactEstimatorNode  # noqa: PLC0415
+
+    cls, bad = {
+        "estimator": (ContactEstimatorNode, Parameter("method", value="no_such_method")),
+        "behavior": (feel_cage_behavior.FeelCageBehaviorNode, Parameter("budgett_s", value=1.0)),
+        "driver": (ActuatorDriverNode, Parameter("protocol", value="no_such_protocol")),
+    }[make]
+    with pytest.raises(ConfigError) as refused:
+        cls(context=ros_context, parameter_overrides=[bad])
+    built = [
+        entry.frame.f_locals["self"]
+        for entry in refused.traceback
+        if isinstance(entry.frame.f_locals.get("self"), cls)
+    ]
+    assert built, "the traceback holds no half-built node"
+    with pytest.raises(InvalidHandle):
+        built[0].get_name()

@@ -89,12 +89,14 @@ from transparency_ros.ros.params import (
     check_unknown,
     choice_error,
     declare,
+    destroyed_if_refused,
     run_node,
 )
 
 GAP_NOTED_RAD = 1e-3  # a setpoint/command difference the diagnostics message mentions
 
 
+@destroyed_if_refused
 class ContactEstimatorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)

@@ -39,7 +39,13 @@ from transparency_ros.core.config import get_actuator
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.feel_cage_config import load_setup
 from transparency_ros.ros.conversions import stamp_to_s
-from transparency_ros.ros.params import ParamSpec, check_unknown, declare, run_node
+from transparency_ros.ros.params import (
+    ParamSpec,
+    check_unknown,
+    declare,
+    destroyed_if_refused,
+    run_node,
+)
 
 NODE_NAME = "feel_cage_behavior"
 P = ParamSpec
@@ -122,6 +128,7 @@ def parameters() -> tuple[ParamSpec, ...]:
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+@destroyed_if_refused
 class FeelCageBehaviorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)

@@ -8,12 +8,14 @@ and are checked against ``config/<node>.yaml`` by the tests, so defaults live in
 from __future__ import annotations
 
 import argparse
+import contextlib
+import functools
 import gc
 import signal
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -184,6 +186,36 @@ def parse_node_cli(
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.parse_args(remove_ros_args(list(sys.argv if argv is None else argv))[1:])
+
+
+NodeT = TypeVar("NodeT", bound=Node)
+
+
+def destroyed_if_refused(cls: type[NodeT]) -> type[NodeT]:
+    """Class decorator: a node whose constructor raises (a refused parameter, a bad file) after
+    ``Node.__init__`` has made its DDS entities is made safe (``make_safe``, if it has one) and
+    destroyed before the error propagates. Left to the garbage collector, the half-built node's
+    entities were torn down at some later moment, under a context being shut down or at
+    interpreter exit, while other participants of the process were running."""
+    init = cls.__init__
+
+    @functools.wraps(init)
+    def init_or_undo(self: Node, *args: Any, **kwargs: Any) -> None:
+        try:
+            init(self, *args, **kwargs)
+        except BaseException:
+            # Node.__init__ itself may have failed: then there is nothing (or less) to undo
+            with contextlib.suppress(Exception):
+                getattr(self, "make_safe", lambda: None)()
+            try:
+                self.destroy_node()
+            except Exception:  # noqa: BLE001 - an override may need what was never built
+                with contextlib.suppress(Exception):
+                    super(cls, self).destroy_node()  # type: ignore[misc]
+            raise
+
+    cls.__init__ = init_or_undo  # type: ignore[method-assign]
+    return cls
 
 
 def freeze_startup() -> None:

@@ -71,11 +71,12 @@ from transparency_ros.ros.actuator_driver.parameters import (
     settings_value,
 )
 from transparency_ros.ros.conversions import stamp_to_s
-from transparency_ros.ros.params import choice_error
+from transparency_ros.ros.params import choice_error, destroyed_if_refused
 from transparency_ros.ros.sim_ball import SimBallInterface
 from transparency_ros.ros.sim_rig import SimRigInterface
 
 
+@destroyed_if_refused
 class ActuatorDriverNode(LifecycleNode):
     """One CAN actuator as a lifecycle node: parameters (``parameters``), what it talks to
     (``hardware``), the ROS-free loop (``canbus.loop.ControlLoop``) fed with targets from
