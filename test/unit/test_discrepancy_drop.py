@@ -458,3 +458,30 @@ def test_without_commands_theta_d_is_read_from_the_drive_torque(tmp_path: Path) 
         assert trial.theta_d == rest_position(trial)
         assert any("no efforts: theta_d taken as the arm's rest position" in n
                    for n in trial.notes)  # fmt: skip
+
+
+def test_a_lattice_coarser_than_the_models_error_is_named_after_the_search(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A 1024-count encoder (6.1 mrad) and a height sensor with 0.2 mm of noise (2 mrad at
+    the arm, as potentiometers on the zoo have), on a rig whose model is otherwise right once
+    the shuttle's weight is in. The search stops at the noise floor, which counts the
+    lattice's own error (a count / sqrt 12, 1.8 mrad), so the lattice was never tried (6 of 17
+    coarse encoders on the zoo's fresh seeds 9300-9399). Tried after the search, judged
+    against the encoder's noise at rest, it is named with its step."""
+    from transparency_ros.synth import drop_campaign  # noqa: PLC0415
+
+    step = 2 * np.pi / 1024
+    monkeypatch.setitem(drop_campaign._SAMPLERS, "quantization", lambda r, m, a: {"step_rad": step})
+    out = write_drop_campaign(
+        tmp_path / "c", 4, hidden=["payload_gravity", "quantization"], actuator="U10DD"
+    )
+    rng = np.random.default_rng(2)
+    trials = [
+        replace(t, height=t.height + rng.normal(0.0, 2e-4, t.height.size))
+        for t in (load_drop_trial(b) for b in find_bags([str(out / "bags")]))
+    ]
+    report = Discoverer(DropProblem(trials, load_drop_nominal(None, trials))).run()
+    named = {f.effect: f for f in report.findings}
+    assert set(named) == {"payload_gravity", "quantization"}
+    assert named["quantization"].parameters["step_rad"] == pytest.approx(step, rel=0.01)

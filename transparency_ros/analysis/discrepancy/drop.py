@@ -383,14 +383,20 @@ class DropProblem:
             counts.append(float(np.min(spacing)) if spacing.size else 0.0)
         return float(np.median(counts)) if counts else 0.0
 
-    def sensor_scope(self, effects: Sequence[DropEffect]) -> tuple[BoolArray, float] | None:
+    def sensor_scope(
+        self, effects: Sequence[DropEffect], after_search: bool = False
+    ) -> tuple[BoolArray, float] | None:
         """For effects that all act on the encoder's readings alone (its lattice, its lateness):
         the held-out error elements of the encoder and its own floor (see leftover_scope), on
         which they are judged. Such an effect cannot touch the heights' or the fall's residual;
         judged on all of it, a coarse encoder went unnamed beside 0.3 mrad the heights kept for
-        another reason (a friction hump the encoder's 3 mrad lattice hides)."""
+        another reason (a friction hump the encoder's 3 mrad lattice hides). After the search
+        (``after_search``) the lattice is judged against the encoder's noise at rest, not
+        against the count / sqrt 12 it would explain (Discoverer._checked_last)."""
         if not effects or any(e.sensor != "encoder" for e in effects):
             return None
+        if after_search and all(e.checked_last for e in effects):
+            return self._encoder_elements, self._sensor_noise[0]
         return self._encoder_elements, self._encoder_floor
 
     @cached_property

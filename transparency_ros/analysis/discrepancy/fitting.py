@@ -65,9 +65,13 @@ def refit(
 ) -> tuple[list[FloatArray], Any]:
     """The fittable parameters of ``effects[start:]`` fitted together on the fitting trials
     (the others held), from their current values; (params, least-squares result) or
-    (params, None) when there are fewer than two to fit or the joint fit is no better."""
+    (params, None) when there is nothing to fit but the last effect (just fitted alone) or the
+    joint fit is no better. An effect with nothing to fit (the shuttle's weight, an encoder's
+    lattice) added after one that was fitted without it refits that one: a drift of b_v
+    fitted without the weight had set the Coulomb torque to 0 to stand in for it, and the
+    weight, added on top unfitted, was refused as making the fit worse (zoo 9331)."""
     index = [i for i, e in enumerate(effects) if e.fittable and i >= start]
-    if len(index) < 2:
+    if not index or index == [len(effects) - 1]:
         return list(params), None
     sizes = [params[i].size for i in index]
     lower = np.concatenate([np.asarray(effects[i].lower, dtype=float) for i in index])
