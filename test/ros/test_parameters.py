@@ -15,11 +15,16 @@ rclpy = pytest.importorskip("rclpy")
 from rcl_interfaces.msg import ParameterType  # noqa: E402
 from rcl_interfaces.srv import GetParameters  # noqa: E402
 from rclpy.context import Context  # noqa: E402
+from rclpy.exceptions import InvalidHandle  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
 
 from test.ros.conftest import Spinner, wait_for  # noqa: E402
 from test.ros.test_actuator_driver import make_probe  # noqa: E402
+from transparency_ros.core.errors import ConfigError  # noqa: E402
 from transparency_ros.ros import estimator_params, feel_cage_behavior  # noqa: E402
 from transparency_ros.ros.actuator_driver import PARAMETERS as DRIVER  # noqa: E402
+from transparency_ros.ros.actuator_driver.node import ActuatorDriverNode  # noqa: E402
+from transparency_ros.ros.contact_estimator import ContactEstimatorNode  # noqa: E402
 from transparency_ros.ros.params import ParamSpec  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -150,13 +155,6 @@ def test_a_refused_node_is_destroyed_before_the_error_leaves(
 ) -> None:
     """A constructor that refuses a parameter after Node.__init__ has made the node undoes it:
     the half-built node (held here by the traceback) is destroyed, not left to the collector."""
-    from rclpy.exceptions import InvalidHandle  # noqa: PLC0415
-    from rclpy.parameter import Parameter  # noqa: PLC0415
-
-    from transparency_ros.core.errors import ConfigError  # noqa: PLC0415
-    from transparency_ros.ros.actuator_driver.node import ActuatorDriverNode  # noqa: PLC0415
-    from transparency_ros.ros.contact_estimator import ContactEstimatorNode  # noqa: PLC0415
-
     cls, bad = {
         "estimator": (ContactEstimatorNode, Parameter("method", value="no_such_method")),
         "behavior": (feel_cage_behavior.FeelCageBehaviorNode, Parameter("budgett_s", value=1.0)),

@@ -197,15 +197,15 @@ class Discoverer:
     ) -> tuple[list[Any], list[FloatArray], FloatArray]:
         """Each declared effect not yet in the model, added where it improves the held-out
         fit (lower RMSE, information criterion better by 10)."""
-        for cand in self._pending_declared(effects):
-            base = _Base(held_err, rmse(held_err), aic(held_err, _total(params)), floor)
-            step = self._single(effects, params, cand, base)
-            if not (step.meaningful and step.rmse < base.rmse and step.aic < base.aic - 10):
-                continue
-            report.findings.append(self._finding(cand, step, base, base.rmse, step.rmse))
-            self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
-            effects, params, held_err = [*effects, cand], step.params, step.err
-        return effects, params, held_err
+        return self._each_added(
+            report,
+            (effects, params, held_err),
+            self._pending_declared(effects),
+            floor,
+            lambda step, base: (
+                step.meaningful and step.rmse < base.rmse and step.aic < base.aic - 10
+            ),
+        )
 
     def _checked_last(
         self,
@@ -224,10 +224,32 @@ class Discoverer:
         the lattice unnamed (6 of 17 coarse encoders on the zoo's fresh seeds 9300-9399). Here
         it is judged against the floor without its own error (``sensor_scope`` after the
         search); in the search, against the whole floor, as before."""
-        for cand in [c for c in remaining if getattr(c, "checked_last", False)]:
+        return self._each_added(
+            report,
+            (effects, params, held_err),
+            [c for c in remaining if getattr(c, "checked_last", False)],
+            floor,
+            self._names,
+            after_search=True,
+        )
+
+    def _each_added(
+        self,
+        report: Report,
+        model: tuple[list[Any], list[FloatArray], FloatArray],
+        candidates: list[Any],
+        floor: float,
+        accept: Callable[[_Step, _Base], bool],
+        *,
+        after_search: bool = False,
+    ) -> tuple[list[Any], list[FloatArray], FloatArray]:
+        """Each of ``candidates`` in turn added to the model (effects, parameters, held-out
+        error) where ``accept`` takes it, and reported."""
+        effects, params, held_err = model
+        for cand in candidates:
             base = _Base(held_err, rmse(held_err), aic(held_err, _total(params)), floor)
-            step = self._single(effects, params, cand, base, after_search=True)
-            if not self._names(step, base):
+            step = self._single(effects, params, cand, base, after_search=after_search)
+            if not accept(step, base):
                 continue
             report.findings.append(self._finding(cand, step, base, base.rmse, step.rmse))
             self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
