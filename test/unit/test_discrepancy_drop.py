@@ -16,6 +16,7 @@ from transparency_ros.analysis.discrepancy.drop import (
     load_drop_nominal,
     load_drop_trial,
 )
+from transparency_ros.analysis.discrepancy.drop_effects import DropBacklash
 from transparency_ros.analysis.discrepancy.drop_trials import rest_position
 from transparency_ros.bag.reader import find_bags
 from transparency_ros.core import strict_json
@@ -279,6 +280,27 @@ def test_backlash_is_measured_with_where_the_arm_starts_in_its_band(
     x, _ = fit_candidate(problem, [], [], backlash)
     assert x[0] == pytest.approx(0.02, rel=0.1)
     assert x[1] == pytest.approx(start, abs=0.15)
+
+
+@pytest.mark.parametrize("start", [1.0, -0.4])
+def test_the_smallest_band_is_named_unless_the_recording_shows_where_the_arm_started(
+    tmp_path: Path, start: float
+) -> None:
+    """Both variants of the band are candidates: the arm on the far flank (the width alone)
+    and the start fitted with it. With the arm on the far flank the two explain the
+    recordings alike and the one with fewer parameters is named: a band as wide as the strike
+    shows (on the zoo a start fitted near the middle made widths 2x the truth). Started inside
+    the band, the width alone cannot explain the recordings, and the start is named too."""
+    problem = _self_simulated(tmp_path, backlash_rad=0.02, backlash_start=start)
+    problem._candidates = [DropBacklash(), DropBacklash(start=1.0)]
+    report = Discoverer(problem).run()
+    assert [f.effect for f in report.findings] == ["backlash"]
+    found = report.findings[0].parameters
+    assert found["backlash_rad"] == pytest.approx(0.02, rel=0.1)
+    if start == 1.0:
+        assert "start_in_band" not in found
+    else:
+        assert found["start_in_band"] == pytest.approx(start, abs=0.15)
 
 
 def test_where_an_arm_rests_in_its_band_does_not_move_the_falling_shuttle(
