@@ -99,6 +99,14 @@ def _total(params: Sequence[FloatArray]) -> int:
     return sum(p.size for p in params)
 
 
+def _same(a: Any, b: Any) -> bool:
+    """Whether two candidates are variants of one effect (a band with its start fitted, and
+    with the arm on its far flank): once one is named the others leave the search, and they
+    are never paired. Variants are told by name, so the contact spring and the hub-arm spring
+    (both ``structural_compliance``) are variants too."""
+    return bool(a.name == b.name)
+
+
 class Discoverer:
     """The loop on one :class:`Problem`: :meth:`run` names effects one round at a time (pairs
     when no single effect explains enough) and reports what is left."""
@@ -166,8 +174,7 @@ class Discoverer:
                 self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
             effects = [*effects, *step.added]
             params, held_err = step.params, step.err
-            # (an effect's other variants go with it: a band with its start fitted, and not)
-            remaining = [c for c in remaining if all(c.name != a.name for a in step.added)]
+            remaining = [c for c in remaining if not any(_same(c, a) for a in step.added)]
             if step.joint:  # every parameter refitted: the findings' values and intervals
                 intervals = interval(step.result, step.result.x)
                 update_findings(report, effects, params, intervals)
@@ -443,8 +450,8 @@ class Discoverer:
         for i, first in enumerate(ranked):
             for second in ranked[i + 1 :]:
                 added = [*first.added, *second.added]
-                if len({a.name for a in added}) < len(added):
-                    continue  # (two variants of one effect)
+                if any(_same(a, b) for a in first.added for b in second.added):
+                    continue
                 self.progress(f"trying {' + '.join(c.name for c in added)}")
                 x0 = [*params, *(x for _, x in first.new()), *(x for _, x in second.new())]
                 # the pair's own parameters first (the effects found before held)
