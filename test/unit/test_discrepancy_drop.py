@@ -16,7 +16,13 @@ from transparency_ros.analysis.discrepancy.drop import (
     load_drop_nominal,
     load_drop_trial,
 )
-from transparency_ros.analysis.discrepancy.drop_effects import DropBacklash
+from transparency_ros.analysis.discrepancy.drop_clip import drive_clip
+from transparency_ros.analysis.discrepancy.drop_effects import (
+    DeclaredWeight,
+    DropBacklash,
+    MeasuredSaturation,
+    drop_library,
+)
 from transparency_ros.analysis.discrepancy.drop_trials import rest_position
 from transparency_ros.bag.reader import find_bags
 from transparency_ros.core import strict_json
@@ -458,9 +464,61 @@ def test_a_drive_limit_clips_the_impedance_and_nothing_else(tmp_path: Path) -> N
     _, q_low, _ = problem.held.sim.run(replace(base, torque_limit_nm=0.3))
     assert np.array_equal(q_free, q_high)
     assert np.all(np.abs(q_low).max(axis=1) > np.abs(q_free).max(axis=1) + 1e-3)
-    saturation = next(c for c in problem.candidates() if c.name == "torque_saturation")
+    # the fitted limit (a recording without the drive's torques)
+    library = drop_library(0.5, 0.03, 1e-3, 1e-3, torques_recorded=False)
+    saturation = next(c for c in library if c.name == "torque_saturation")
     ph = saturation.apply(base, np.array([0.3]), problem)
     assert ph.torque_limit_nm == 0.3
+
+
+def test_a_drive_limit_is_read_off_the_recorded_torque_and_named_where_it_clips(
+    tmp_path: Path,
+) -> None:
+    """A drive clipped at 0.3 N m records its torque held there while the impedance law asks
+    for more: the limit is read off the recording (not fitted) with the readings' range as its
+    interval, and named where the recording shows it, with what it does to the held-out fit.
+    Torques that follow the law leave no limit to search for; without recorded torques the
+    limit is fitted, as before."""
+    limit = 0.3
+    problem = _self_simulated(tmp_path, torque_limit_nm=limit)
+    clipped = []
+    for s in (problem.fit, problem.held):
+        for trial, (t_piece, q_piece) in zip(s.trials, s.q, strict=True):
+            q = trial.q.copy()
+            piece = (trial.t_q >= trial.start_s) & (trial.t_q <= trial.start_s + t_piece[-1])
+            q[piece] = np.interp(trial.t_q[piece] - trial.start_s, t_piece, q_piece)
+            asked = trial.k_s * (trial.theta_d - q)
+            clipped.append(replace(trial, q=q, effort=np.clip(asked, -limit, limit)))
+    clip = drive_clip(clipped)
+    assert clip is not None and clip.trials == len(clipped)
+    assert clip.limit_nm == pytest.approx(limit, rel=1e-6)
+    assert clip.interval_nm[0] <= limit <= clip.interval_nm[1]
+    assert clip.asked_nm > limit
+    problem._candidates = [DeclaredWeight(), MeasuredSaturation(clip)]
+    report = Discoverer(problem).run()
+    found = {f.effect: f for f in report.findings}
+    assert "torque_saturation" in found
+    saturation = found["torque_saturation"]
+    assert saturation.parameters["limit_nm"] == pytest.approx(limit, rel=1e-6)
+    lo, hi = saturation.confidence_interval["limit_nm"]
+    assert lo <= limit <= hi and hi - lo < 1e-3
+    assert "read off the recording: the recorded drive torque held at 0.3 N m" in (
+        saturation.evidence
+    )
+    # the law followed, one glitch, a torque that falls away rather than holding: no limit
+    assert drive_clip([replace(t, effort=t.k_s * (t.theta_d - t.q)) for t in clipped]) is None
+    glitch = [replace(t, effort=t.k_s * (t.theta_d - t.q)) for t in clipped]
+    for t in glitch:
+        assert t.effort is not None
+        t.effort[np.argmax(np.abs(t.effort))] *= 0.5
+    assert drive_clip(glitch) is None
+    fading = [replace(t, effort=0.5 * t.k_s * (t.theta_d - t.q)) for t in clipped]
+    assert drive_clip(fading) is None
+    out = write_drop_campaign(tmp_path / "u", 2, hidden=[], actuator="EC60")
+    assert not [c for c in _problem(out).candidates() if c.name == "torque_saturation"]
+    _rewrite(out / "bags", tmp_path / "n" / "bags", effort_shift_nm=None)
+    fitted = [c for c in _problem(tmp_path / "n").candidates() if c.name == "torque_saturation"]
+    assert len(fitted) == 1 and fitted[0].fittable
 
 
 def test_without_commands_theta_d_is_read_from_the_drive_torque(tmp_path: Path) -> None:

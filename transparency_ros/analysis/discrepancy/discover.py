@@ -204,14 +204,19 @@ class Discoverer:
         floor: float,
     ) -> tuple[list[Any], list[FloatArray], FloatArray]:
         """Each declared effect not yet in the model, added where it improves the held-out
-        fit (lower RMSE, information criterion better by 10)."""
+        fit (lower RMSE, information criterion better by 10) or where the recording shows it
+        acting (``shown``: a drive's recorded torque held at its limit)."""
         return self._each_added(
             report,
             (effects, params, held_err),
             self._pending_declared(effects),
             floor,
             lambda step, base: (
-                step.meaningful and step.rmse < base.rmse and step.aic < base.aic - 10
+                step.meaningful
+                and (
+                    all(getattr(a, "shown", False) for a in step.added)
+                    or (step.rmse < base.rmse and step.aic < base.aic - 10)
+                )
             ),
         )
 
@@ -281,9 +286,17 @@ class Discoverer:
         out = []
         for single in sorted(singles, key=lambda c: c.rmse)[:PAIR_FINALISTS] if pending else []:
             for cand in pending:
-                x = self.problem.initial(cand)
-                step = self._step(effects, [*single.params, x], [*single.added, cand], None, base)
-                step.result, step.joint = single.result, single.joint  # the single's fit
+                added = [*single.added, cand]
+                # the single was fitted without the declared effect: refitted with it (a
+                # sensor's delay fitted without the weight left twice the floor, zoo_1019)
+                joint, result = refit(
+                    self.problem, [*effects, *added], [*single.params, self.problem.initial(cand)]
+                )
+                step = self._step(effects, joint, added, result, base)
+                if result is None:  # no better: the single's fit
+                    step.result, step.joint = single.result, single.joint
+                else:
+                    step.joint = True
                 step.alone_rmse, step.alone_aic = [single.rmse], [single.aic]
                 out.append(step)
         return out
@@ -485,12 +498,14 @@ class Discoverer:
 
     def _finding(self, cand: Any, step: _Step, base: _Base, before: float, after: float) -> Finding:
         x = step.params[len(step.params) - len(step.added) + step.added.index(cand)]
-        ci = (
-            interval(step.result, x)
-            if not step.joint and getattr(cand, "fittable", True)
-            else [(float(v), float(v)) for v in x]  # set from the joint fit afterwards
-        )
+        if not getattr(cand, "fittable", True):  # read off the recording, or declared
+            ci = getattr(cand, "measured_interval", lambda: [(float(v), float(v)) for v in x])()
+        elif not step.joint:
+            ci = interval(step.result, x)
+        else:
+            ci = [(float(v), float(v)) for v in x]  # set from the joint fit afterwards
         together = [a.name for a in step.added if a is not cand]
+        read_off = hasattr(cand, "describe")
         judged_before, judged_after, judged_floor = step.judged
         judged = (
             f"; judged on the encoder: {judged_before:.4g} -> {judged_after:.4g} rad "
@@ -507,6 +522,7 @@ class Discoverer:
             evidence=(
                 f"held-out simulation RMSE {before:.4g} -> {after:.4g} rad "
                 f"({100 * (1 - after / before):.0f} % lower) with {x.size} parameter(s)"
+                + (f"; read off the recording: {cand.describe()}" if read_off else "")
                 + judged
                 + (
                     f"; found together with {', '.join(together)} (neither explains it alone)"

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from transparency_ros.analysis.discrepancy.drop_clip import DriveClip
 from transparency_ros.analysis.discrepancy.drop_physics import DropPhysics
 from transparency_ros.analysis.discrepancy.effects import drifted, pinned
 from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
@@ -449,15 +450,63 @@ class DeclaredWeight(DropEffect):
         return {"mgl_uncertainty_nm": float(LOCAL_GRAVITY_SPREAD * p[0])}
 
 
+class MeasuredSaturation(DropEffect):
+    """The drive clips its torque (a current limit) at the level its own recorded torque
+    shows (:mod:`drop_clip`): read off, not fitted, and named where the recording shows the
+    clip (``shown``), whatever the encoder's trace gains by it: a clip that acts late in a
+    trial changes the trace too little for a fit to name (the fitted limit removed 0.01 of
+    1.3 mrad on zoo_9588, where the recorded torque stood at 0.4234 N m in all 10 trials).
+    Its interval is the clipped readings' range and the torque's noise, not widened by the
+    model's error (nothing of the model is in it)."""
+
+    shown = True
+
+    def __init__(self, clip: DriveClip) -> None:
+        super().__init__(
+            "torque_saturation", ("limit_nm",), (0.0,), (math.inf,), fittable=False, declared=True
+        )
+        self.clip = clip
+
+    def initial(self, problem: DropProblem) -> FloatArray:
+        return np.array([self.clip.limit_nm])
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return replace(ph, torque_limit_nm=float(p[0]))
+
+    def meaningful(self, p: FloatArray) -> bool:
+        return True  # read off, not a fit that may stand at a bound of its range
+
+    def measured_interval(self) -> list[tuple[float, float]]:
+        return [self.clip.interval_nm]
+
+    def describe(self) -> str:
+        return self.clip.describe()
+
+
 def drop_library(
     shuttle_mass_kg: float,
     coulomb_nm: float,
     loaded_inertia_kgm2: float,
     sample_interval_s: float,
+    *,
+    torques_recorded: bool = False,
+    clip: DriveClip | None = None,
 ) -> list[DropEffect]:
     """The candidates (``loaded_inertia_kgm2``: the arm's with the shuttle on it, J_a + m r^2,
     for the frequency a torsional compliance is reported at; ``sample_interval_s``: between
-    the encoder's readings)."""
+    the encoder's readings). A drive's limit is read off its recorded torque where it shows
+    one (``clip``); where every trial recorded the drive's torque and none shows a clip, no
+    limit is searched for (the torque would show it); where torques are missing, it is
+    fitted."""
+    if clip is not None:
+        saturation: list[DropEffect] = [MeasuredSaturation(clip)]
+    elif torques_recorded:
+        saturation = []
+    else:
+        # the drive clips its impedance torque (a current limit); the offset is added after it
+        saturation = [
+            SetPhysics("torque_saturation", "limit_nm", 0.02, 3.0, "torque_limit_nm", null=None)
+        ]
     return [
         DropDrift(),
         DropOffset(coulomb_nm),
@@ -471,7 +520,6 @@ def drop_library(
         DropBacklash(start=1.0),
         SensorDelay(sample_interval_s),
         DropQuantization(),
-        # the drive clips its impedance torque (a current limit); the offset is added after it
-        SetPhysics("torque_saturation", "limit_nm", 0.02, 3.0, "torque_limit_nm", null=None),
+        *saturation,
         DropCogging(),
     ]

@@ -61,6 +61,8 @@ class DropTrial:
     strike_sign: int = MODEL_STRIKE_SIGN  # the rig's: q and theta_d above are mirrored if +1
     release_recorded: bool = True  # False: the recording starts during the fall
     notes: tuple[str, ...] = ()  # what was assumed or detected, in words a user can act on
+    # the drive's recorded torque at t_q in the model's theta sense (None: none recorded)
+    effort: FloatArray | None = None
 
     @property
     def sense(self) -> float:
@@ -131,8 +133,8 @@ def load_drop_trial(path: str | Path) -> DropTrial:
             "fall: the release is not recorded, the fall is fitted from the recorded part"
         )
     rest = float(np.median(q[t_q < contact - LEAD_S][-10:]))
+    effort = states.effort[keep]
     if theta_d is None:
-        effort = states.effort[keep]
         theta_d = _setpoint_from_effort(t_q, q, effort, contact, numbers["transparency.k_s"])
         if theta_d is not None:
             notes.append(
@@ -147,7 +149,7 @@ def load_drop_trial(path: str | Path) -> DropTrial:
             )
     sign = _strike_sign(t_q, q, rest, contact, declared, notes=notes)
     if sign != MODEL_STRIKE_SIGN:
-        q, theta_d = -q, -theta_d
+        q, theta_d, effort = -q, -theta_d, -effort
     return DropTrial(
         name=f"{p.parent.name}/{p.name}",
         actuator=custom["transparency.actuator"],
@@ -169,6 +171,7 @@ def load_drop_trial(path: str | Path) -> DropTrial:
         strike_sign=sign,
         release_recorded=recorded,
         notes=tuple(notes),
+        effort=effort if np.isfinite(effort).any() else None,
     )
 
 

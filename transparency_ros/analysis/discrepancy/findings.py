@@ -126,7 +126,7 @@ def widen(report: Report, share: float) -> None:
         ci = {}
         for name, (lo, hi) in finding.confidence_interval.items():
             x = finding.parameters[name]
-            if lo == hi or share <= 0:  # nothing fitted (a declared or read-off value)
+            if lo == hi or share <= 0 or not effect.fittable:  # declared or read off
                 ci[name] = (lo, hi)
                 continue
             model = math.log10(1 + share) if name.startswith("log10_") else share * x
