@@ -498,12 +498,13 @@ class Discoverer:
 
     def _finding(self, cand: Any, step: _Step, base: _Base, before: float, after: float) -> Finding:
         x = step.params[len(step.params) - len(step.added) + step.added.index(cand)]
-        if not getattr(cand, "fittable", True):  # read off the recording, or declared
-            ci = getattr(cand, "measured_interval", lambda: [(float(v), float(v)) for v in x])()
-        elif not step.joint:
-            ci = interval(step.result, x)
+        if hasattr(cand, "measured_interval"):  # read off the recording
+            ci = cand.measured_interval()
+        elif not getattr(cand, "fittable", True) or step.joint:
+            # declared (a point), or set from the joint fit afterwards
+            ci = [(float(v), float(v)) for v in x]
         else:
-            ci = [(float(v), float(v)) for v in x]  # set from the joint fit afterwards
+            ci = interval(step.result, x)
         together = [a.name for a in step.added if a is not cand]
         read_off = hasattr(cand, "describe")
         judged_before, judged_after, judged_floor = step.judged

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from transparency_ros.analysis.discrepancy.drop_trials import LEAD_S, DropTrial
+from transparency_ros.analysis.discrepancy.drop_trials import DropTrial, at_rest
 from transparency_ros.analysis.discrepancy.model import FloatArray
 
 CLIP_SHARE = 0.1  # a clipped reading is at least this share of the asked torque below it
@@ -24,7 +24,6 @@ CLIP_RUN = 3  # consecutive clipped readings (one glitch is no limit)
 CLIP_FLAT = 0.05  # a limit holds one level: its readings within this share of their median
 CLIP_TRIALS = 2  # trials that must show it (all of them where fewer have efforts)
 NOISE_SIGMAS = 5  # readings off the impedance law by more than this many sigma at rest
-REST_S = 0.05  # the stretch before the impact piece the torque's noise is measured on
 
 
 @dataclass(frozen=True)
@@ -48,8 +47,8 @@ def drive_clip(trials: Sequence[DropTrial]) -> DriveClip | None:
     """The level the recorded drive torque is held at while the impedance law asks for more,
     in at least ``CLIP_TRIALS`` trials (all of them where fewer recorded torques); None where
     no trial recorded torques or they follow the law."""
-    recorded = [t for t in trials if t.effort is not None]
-    shown = [c for c in (_clipped(t) for t in recorded) if c is not None]
+    recorded = [(t, t.effort) for t in trials if t.effort is not None]
+    shown = [c for c in (_clipped(t, effort) for t, effort in recorded) if c is not None]
     if not recorded or len(shown) < min(CLIP_TRIALS, len(recorded)):
         return None
     levels = np.concatenate([c[0] for c in shown])
@@ -63,14 +62,12 @@ def drive_clip(trials: Sequence[DropTrial]) -> DriveClip | None:
     )
 
 
-def _clipped(trial: DropTrial) -> tuple[FloatArray, float, float] | None:
+def _clipped(trial: DropTrial, effort: FloatArray) -> tuple[FloatArray, float, float] | None:
     """(the clipped readings' magnitudes, the torque's noise at rest, the largest torque asked
-    there) of one trial; None where its torque follows the impedance law."""
-    assert trial.effort is not None
-    effort = trial.effort
+    there) of one trial and its recorded torque; None where it follows the impedance law."""
     asked = trial.k_s * (trial.theta_d - trial.q)
     ok = np.isfinite(effort)
-    rest = ok & (trial.t_q < trial.start_s) & (trial.t_q >= trial.contact_s - LEAD_S - REST_S)
+    rest = ok & at_rest(trial.t_q, trial.contact_s)
     off = effort[rest] - asked[rest]
     noise = 1.4826 * float(np.median(np.abs(off - np.median(off)))) if off.size else 0.0
     steps = np.abs(np.diff(trial.q))

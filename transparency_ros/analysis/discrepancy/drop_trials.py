@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from transparency_ros.analysis.discrepancy.model import FloatArray
 from transparency_ros.bag.errors import BagReadError
@@ -31,6 +32,7 @@ from transparency_ros.core.errors import ModelError
 
 LEAD_S = 0.003  # the impact piece starts this long before the recorded contact
 AFTER_S = 0.25  # and lasts this long after it
+REST_S = 0.05  # the stretch before the impact piece where the arm is at rest
 SWING_S = 0.03  # the arm's first swing after contact, which shows the strike's direction
 STRIKE_SIGN_KEY = "transparency.strike_sign"
 MODEL_STRIKE_SIGN = -1  # the model's convention: a strike turns the arm to negative theta
@@ -277,10 +279,16 @@ def _setpoint_from_effort(
     """theta_d by the impedance law tau = k_s (theta_d - theta) from the last 50 ms before the
     impact piece's start, where the arm is at rest (the damping term is then nil); None when
     the recording has no efforts there or k_s is not positive."""
-    sel = (t_q < contact - LEAD_S) & (t_q >= contact - LEAD_S - 0.05) & np.isfinite(effort)
+    sel = at_rest(t_q, contact) & np.isfinite(effort)
     if k_s <= 0 or np.count_nonzero(sel) < 5:
         return None
     return float(np.median(q[sel] + effort[sel] / k_s))
+
+
+def at_rest(t_q: FloatArray, contact: float) -> npt.NDArray[np.bool_]:
+    """The encoder samples of the last ``REST_S`` before the impact piece, where the arm is
+    at rest (theta_d and the drive torque's noise are read there)."""
+    return (t_q < contact - LEAD_S) & (t_q >= contact - LEAD_S - REST_S)
 
 
 def rest_position(trial: DropTrial) -> float:
