@@ -40,6 +40,7 @@ from functools import cached_property
 import numpy as np
 import numpy.typing as npt
 
+from transparency_ros.analysis.discrepancy.drop_bounce import shuttle_bounces
 from transparency_ros.analysis.discrepancy.drop_clip import drive_clip
 from transparency_ros.analysis.discrepancy.drop_effects import (
     LOCAL_GRAVITY_SPREAD,
@@ -218,6 +219,7 @@ class DropProblem:
                 float(np.median(np.concatenate([np.diff(t.t_q) for t in trials]))),
                 torques_recorded=all(t.effort is not None for t in trials),
                 clip=drive_clip(trials),
+                bounces=shuttle_bounces(trials),
             )
         )
         self.nominal = {
