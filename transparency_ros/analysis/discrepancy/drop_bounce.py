@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from transparency_ros.analysis.discrepancy.drop_trials import DropTrial
+from transparency_ros.analysis.discrepancy.drop_trials import DropTrial, mask_runs, spread
 from transparency_ros.core.config import load_drop_test
 
 APART_SIGMAS = 5  # the load cell reads below this many sigma of its noise: the two are apart
@@ -84,18 +84,10 @@ def _first_pause(trial: DropTrial, threshold: float) -> tuple[float, bool] | Non
     fall = (t > trial.contact_s - NOISE_S[0]) & (t < trial.contact_s - NOISE_S[1])
     if np.count_nonzero(fall) < 10:
         return None  # no noise to judge by: nothing is read
-    noise = 1.4826 * float(np.median(np.abs(force[fall] - np.median(force[fall]))))
-    low = min(APART_SIGMAS * noise, threshold)
+    low = min(APART_SIGMAS * spread(force[fall]), threshold)
     piece = (t > trial.contact_s) & (t <= trial.end_s)
     tp, fp = t[piece], force[piece]
-    apart = np.flatnonzero(fp < low)
-    if apart.size == 0:
-        return None
-    # runs of consecutive samples apart
-    breaks = np.flatnonzero(np.diff(apart) > 1)
-    starts = apart[np.r_[0, breaks + 1]]
-    ends = apart[np.r_[breaks, apart.size - 1]]
-    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+    for a, b in mask_runs(fp < low):
         if b - a + 1 < 2 or tp[b] - tp[a] < APART_S:
             continue
         return float(tp[b] - tp[a]), bool(np.any(fp[b + 1 :] > threshold))

@@ -15,8 +15,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
-from transparency_ros.analysis.discrepancy.drop_trials import DropTrial, at_rest
+from transparency_ros.analysis.discrepancy.drop_trials import DropTrial, at_rest, mask_runs, spread
 from transparency_ros.analysis.discrepancy.model import FloatArray
 
 CLIP_SHARE = 0.1  # a clipped reading is at least this share of the asked torque below it
@@ -68,8 +69,7 @@ def _clipped(trial: DropTrial, effort: FloatArray) -> tuple[FloatArray, float, f
     asked = trial.k_s * (trial.theta_d - trial.q)
     ok = np.isfinite(effort)
     rest = ok & at_rest(trial.t_q, trial.contact_s)
-    off = effort[rest] - asked[rest]
-    noise = 1.4826 * float(np.median(np.abs(off - np.median(off)))) if off.size else 0.0
+    noise = spread(effort[rest] - asked[rest])
     steps = np.abs(np.diff(trial.q))
     count = float(steps[steps > 0].min()) if np.any(steps > 0) else 0.0
     # what the angle's counts and the torque's noise allow between the two
@@ -90,15 +90,10 @@ def _clipped(trial: DropTrial, effort: FloatArray) -> tuple[FloatArray, float, f
     return levels, noise, float(np.abs(asked[runs]).max())
 
 
-def _runs(mask: FloatArray, length: int) -> FloatArray:
+def _runs(mask: npt.NDArray[np.bool_], length: int) -> npt.NDArray[np.bool_]:
     """``mask`` where it holds for at least ``length`` consecutive samples."""
     out = np.zeros(mask.size, dtype=bool)
-    start = None
-    for i, on in enumerate([*mask.tolist(), False]):
-        if on and start is None:
-            start = i
-        elif not on and start is not None:
-            if i - start >= length:
-                out[start:i] = True
-            start = None
+    for first, last in mask_runs(mask):
+        if last - first + 1 >= length:
+            out[first : last + 1] = True
     return out

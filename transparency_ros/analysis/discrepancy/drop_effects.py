@@ -521,10 +521,11 @@ def drop_library(
     fitted. A rebound is named where the load cell shows one (``bounces``), searched for where
     it shows the shuttle leave the arm without striking it again within the recording, and not
     searched for where it never leaves the arm (without ``bounces``: searched for)."""
-    if bounces is None or (bounces.possible and not bounces.shown):
-        rebound: list[DropEffect] = [DropRestitution()]
-    else:
-        rebound = [ShownRestitution(bounces)] if bounces.shown else []
+    rebound: list[DropEffect] = []
+    if bounces is not None and bounces.shown:
+        rebound = [ShownRestitution(bounces)]
+    elif bounces is None or bounces.possible:
+        rebound = [DropRestitution()]
     if clip is not None:
         saturation: list[DropEffect] = [MeasuredSaturation(clip)]
     elif torques_recorded:

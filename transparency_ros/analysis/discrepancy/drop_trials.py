@@ -291,6 +291,22 @@ def at_rest(t_q: FloatArray, contact: float) -> npt.NDArray[np.bool_]:
     return (t_q < contact - LEAD_S) & (t_q >= contact - LEAD_S - REST_S)
 
 
+def spread(x: FloatArray) -> float:
+    """A robust standard deviation of readings about their median (1.4826 times the median
+    absolute deviation; 0 for none): a reading's noise where a few readings stand out."""
+    return 1.4826 * float(np.median(np.abs(x - np.median(x)))) if x.size else 0.0
+
+
+def mask_runs(mask: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """The runs of consecutive True in ``mask``, in order, as (first, last) indices."""
+    on = np.flatnonzero(mask)
+    if on.size == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(on) > 1)
+    starts, ends = on[np.r_[0, breaks + 1]], on[np.r_[breaks, on.size - 1]]
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
+
+
 def rest_position(trial: DropTrial) -> float:
     """The motor position at rest before the impact piece (median of the last 10 samples)."""
     before = trial.q[trial.t_q < trial.start_s]
