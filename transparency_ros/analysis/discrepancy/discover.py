@@ -90,9 +90,15 @@ class _Step:
     alone_rmse: list[float] = field(default_factory=list)  # a pair: the first member alone
     alone_aic: list[float] = field(default_factory=list)  # a pair: each member alone
     alternatives: list[str] = field(default_factory=list)
+    shown: bool = False  # stands for a declared effect the recording shows (see _each_added)
 
     def new(self) -> list[tuple[Any, FloatArray]]:
         return list(zip(self.added, self.params[len(self.params) - len(self.added) :], strict=True))
+
+
+def _not_named(remaining: list[Any], effects: list[Any]) -> list[Any]:
+    """The candidates of ``remaining`` none of whose variants is among ``effects``."""
+    return [c for c in remaining if not any(_same(c, e) for e in effects)]
 
 
 def _total(params: Sequence[FloatArray]) -> int:
@@ -141,6 +147,7 @@ class Discoverer:
         # One that does not improve it yet is tried again after each effect found (a large
         # missing effect may hide it)
         effects, params, held_err = self._declared(report, effects, params, held_err, floor)
+        remaining = _not_named(remaining, effects)
         left = getattr(problem, "structure_left", lambda e: rmse(e) > SIGNIFICANT * floor)
         while remaining and left(held_err):
             base = _Base(held_err, rmse(held_err), aic(held_err, _total(params)), floor)
@@ -179,6 +186,7 @@ class Discoverer:
                 intervals = interval(step.result, step.result.x)
                 update_findings(report, effects, params, intervals)
             effects, params, held_err = self._declared(report, effects, params, held_err, floor)
+            remaining = _not_named(remaining, effects)
         effects, params, held_err = self._checked_last(
             report, effects, params, held_err, remaining=remaining, floor=floor
         )
@@ -218,7 +226,8 @@ class Discoverer:
                 step.meaningful
                 and not self._null_inside(step)
                 and (
-                    all(getattr(a, "shown", False) for a in step.added)
+                    step.shown
+                    or all(getattr(a, "shown", False) for a in step.added)
                     or (step.rmse < base.rmse and step.aic < base.aic - 10)
                 )
             ),
@@ -261,17 +270,49 @@ class Discoverer:
         after_search: bool = False,
     ) -> tuple[list[Any], list[FloatArray], FloatArray]:
         """Each of ``candidates`` in turn added to the model (effects, parameters, held-out
-        error) where ``accept`` takes it, and reported."""
+        error) where ``accept`` takes it, and reported. A shown effect with a ``rival`` (an
+        effect that makes the same sign in the recording: a ring of a compliant arm throws
+        the shuttle off as a rebound does) gives way to it where the shown effect's
+        ``yields`` says the rival explains the recordings as well: the rival stands for what
+        the recording shows, and the shown effect is tried again on top of it (named where
+        its interval excludes its null). Each effect added sends those refused before it back
+        to be tried again (a large missing effect may hide a declared one)."""
         effects, params, held_err = model
-        for cand in candidates:
+        queue, waiting = list(candidates), []
+        while queue:
+            cand = queue.pop(0)
             base = _Base(held_err, rmse(held_err), aic(held_err, _total(params)), floor)
             step = self._single(effects, params, cand, base, after_search=after_search)
-            if not accept(step, base):
+            rival = self._rival_instead(effects, params, cand, step, base)
+            if rival is not None and accept(rival, base):
+                queue.insert(0, cand)  # tried again on top of its rival
+                step, cand = rival, rival.added[0]
+            elif not accept(step, base):
+                waiting.append(cand)
                 continue
+            # those refused so far are tried again with it (it may have hidden them)
+            queue, waiting = [*waiting, *queue], []
             report.findings.append(self._finding(cand, step, base, base.rmse, step.rmse))
             self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
             effects, params, held_err = [*effects, cand], step.params, step.err
         return effects, params, held_err
+
+    def _rival_instead(
+        self, effects: list[Any], params: list[FloatArray], cand: Any, step: _Step, base: _Base
+    ) -> _Step | None:
+        """The step of ``cand``'s ``rival`` where ``cand`` yields to it (``yields``: its own
+        rule, from both fits), marked as standing for what the recording shows; None where
+        it has no rival, the rival is in the model already, or it does not yield."""
+        rival = getattr(cand, "rival", None)
+        if rival is None or any(_same(rival, e) for e in effects):
+            return None
+        other = self._single(effects, params, rival, base)
+        own, its = step.new()[0][1], other.new()[0][1]
+        if not (other.meaningful and cand.yields(own, its, other.rmse / step.rmse)):
+            return None
+        other.shown = True
+        other.alternatives = [cand.alike(own, step.rmse / other.rmse)]
+        return other
 
     def _pending_declared(self, effects: list[Any]) -> list[Any]:
         """The declared effects (``declared`` of a candidate) not yet in the model."""
