@@ -217,13 +217,14 @@ def test_a_rebound_yields_to_a_spring_that_explains_alike_and_not_to_a_worse_one
     """Between a contact's rebound and a hub-arm spring of as many parameters that explain the
     held-out data within 5 %, the spring is named though the rebound fits a little better; a
     rebound that fits clearly better (10 %) is named."""
-    from transparency_ros.analysis.discrepancy.discover import Discoverer, _Step  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.discover import Discoverer  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.steps import Step  # noqa: PLC0415
 
     rebound, spring = DropRestitution(), HubArmCompliance(loaded_inertia_kgm2=0.01)
 
-    def step(effect: object, rmse: float) -> _Step:
+    def step(effect: object, rmse: float) -> Step:
         n = 10_000
-        return _Step(
+        return Step(
             added=[effect],
             params=[np.array([0.5, 6.0])],
             err=np.full(n, rmse),

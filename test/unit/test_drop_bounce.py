@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from transparency_ros.analysis.discrepancy.discover import Discoverer
 from transparency_ros.analysis.discrepancy.drop import (
     DropProblem,
     load_drop_nominal,
@@ -16,10 +18,12 @@ from transparency_ros.analysis.discrepancy.drop import (
 from transparency_ros.analysis.discrepancy.drop_bounce import Bounces, shuttle_bounces
 from transparency_ros.analysis.discrepancy.drop_effects import (
     DropEffect,
+    HubArmCompliance,
     ShownRestitution,
     drop_library,
 )
 from transparency_ros.analysis.discrepancy.drop_trials import DropTrial
+from transparency_ros.analysis.discrepancy.steps import Base, Step
 from transparency_ros.bag.reader import find_bags
 from transparency_ros.synth.drop_campaign import write_drop_campaign
 
@@ -103,20 +107,15 @@ def _declared_after(
     stiffness, damping ratio) with ``ratio`` times its held-out RMSE; the rebound fitted on
     top of the spring has its coefficient's interval away from 0. The fits are given: what
     is tested is the rule that picks between them and what the loop does with its pick."""
-    from types import SimpleNamespace  # noqa: PLC0415
-
-    from transparency_ros.analysis.discrepancy.discover import Discoverer, _Base, _Step  # noqa: PLC0415
-    from transparency_ros.analysis.discrepancy.drop_effects import HubArmCompliance  # noqa: PLC0415
-
     spring = HubArmCompliance(loaded_inertia_kgm2=0.01)
     shown = ShownRestitution(Bounces(struck_again=8, left=8, of=8, pause_s=0.008), rival=spring)
     fitted = {id(shown): np.array(rebound_fit), id(spring): np.array(spring_fit)}
 
     def single(
-        effects: list[object], params: list[np.ndarray], cand: object, base: _Base, **_: object
-    ) -> _Step:
+        effects: list[object], params: list[np.ndarray], cand: object, base: Base, **_: object
+    ) -> Step:
         rmse = 1e-3 * (ratio if cand is spring else 1.0) * (0.9 if effects else 1.0)
-        return _Step(
+        return Step(
             added=[cand],
             params=[*params, fitted[id(cand)]],
             err=np.full(1000, rmse),

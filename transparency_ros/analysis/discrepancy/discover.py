@@ -31,7 +31,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -56,61 +55,12 @@ from transparency_ros.analysis.discrepancy.fitting import (
 )
 from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel, Trial
 from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
+from transparency_ros.analysis.discrepancy.steps import Base, Step, not_named, same, total
 from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem
 from transparency_ros.core.errors import ModelError
 
 PAIR_FINALISTS = 3  # pairs refitted with the effects found before them
 EXPECTED_MARGIN = 1.10  # an effect the recording predicts is preferred this close to the best
-
-
-@dataclass
-class _Base:
-    """The held-out error a round starts from."""
-
-    err: FloatArray
-    rmse: float
-    aic: float
-    floor: float  # the noise floor
-
-
-@dataclass
-class _Step:
-    """One or two candidate effects added to those found so far, with all parameters."""
-
-    added: list[Any]
-    params: list[FloatArray]  # of the effects found so far, then of ``added``
-    err: FloatArray  # held-out
-    rmse: float
-    aic: float
-    gain: float  # share of the held-out error above the noise floor it removes
-    judged: tuple[float, float, float]  # (RMSE before, after, floor) the gain is judged on
-    result: Any  # the least-squares fit behind the parameters
-    meaningful: bool
-    joint: bool = False  # ``result`` fitted every parameter, not only those of ``added``
-    alone_rmse: list[float] = field(default_factory=list)  # a pair: the first member alone
-    alone_aic: list[float] = field(default_factory=list)  # a pair: each member alone
-    alternatives: list[str] = field(default_factory=list)
-    shown: bool = False  # stands for a declared effect the recording shows (see _each_added)
-
-    def new(self) -> list[tuple[Any, FloatArray]]:
-        return list(zip(self.added, self.params[len(self.params) - len(self.added) :], strict=True))
-
-
-def _not_named(remaining: list[Any], effects: list[Any]) -> list[Any]:
-    """The candidates of ``remaining`` none of whose variants is among ``effects``."""
-    return [c for c in remaining if not any(_same(c, e) for e in effects)]
-
-
-def _total(params: Sequence[FloatArray]) -> int:
-    return sum(p.size for p in params)
-
-
-def _same(a: Any, b: Any) -> bool:
-    """Whether two candidates are variants of one effect (a band with its start fitted, and
-    with the arm on its far flank): once one is named the others leave the search, and they
-    are never paired. Variants are told by name, so the contact spring and the hub-arm spring
-    (both ``structural_compliance``) are variants too."""
-    return bool(a.name == b.name)
 
 
 class Discoverer:
@@ -140,17 +90,17 @@ class Discoverer:
         report.heldout_rmse_nominal = rmse(held_err)
         remaining = [c for c in problem.candidates() if not getattr(c, "declared", False)]
         floor = problem.noise_floor()
-        closest: _Step | None = None
+        closest: Step | None = None
         # effects whose size the recording declares (no parameter fitted) come first, each
         # named where it improves the held-out fit: known physics is in the model before
         # anything is searched for (a fitted constant torque would take the declared weight).
         # One that does not improve it yet is tried again after each effect found (a large
         # missing effect may hide it)
         effects, params, held_err = self._declared(report, effects, params, held_err, floor)
-        remaining = _not_named(remaining, effects)
+        remaining = not_named(remaining, effects)
         left = getattr(problem, "structure_left", lambda e: rmse(e) > SIGNIFICANT * floor)
         while remaining and left(held_err):
-            base = _Base(held_err, rmse(held_err), aic(held_err, _total(params)), floor)
+            base = Base(held_err, rmse(held_err), aic(held_err, total(params)), floor)
             singles = [self._single(effects, params, cand, base) for cand in remaining]
             step = self._choose([s for s in singles if self._names(s, base)])
             if step is None:
@@ -181,12 +131,12 @@ class Discoverer:
                 self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
             effects = [*effects, *step.added]
             params, held_err = step.params, step.err
-            remaining = [c for c in remaining if not any(_same(c, a) for a in step.added)]
+            remaining = [c for c in remaining if not any(same(c, a) for a in step.added)]
             if step.joint:  # every parameter refitted: the findings' values and intervals
                 intervals = interval(step.result, step.result.x)
                 update_findings(report, effects, params, intervals)
             effects, params, held_err = self._declared(report, effects, params, held_err, floor)
-            remaining = _not_named(remaining, effects)
+            remaining = not_named(remaining, effects)
         effects, params, held_err = self._checked_last(
             report, effects, params, held_err, remaining=remaining, floor=floor
         )
@@ -265,7 +215,7 @@ class Discoverer:
         model: tuple[list[Any], list[FloatArray], FloatArray],
         candidates: list[Any],
         floor: float,
-        accept: Callable[[_Step, _Base], bool],
+        accept: Callable[[Step, Base], bool],
         *,
         after_search: bool = False,
     ) -> tuple[list[Any], list[FloatArray], FloatArray]:
@@ -281,7 +231,7 @@ class Discoverer:
         queue, waiting = list(candidates), []
         while queue:
             cand = queue.pop(0)
-            base = _Base(held_err, rmse(held_err), aic(held_err, _total(params)), floor)
+            base = Base(held_err, rmse(held_err), aic(held_err, total(params)), floor)
             step = self._single(effects, params, cand, base, after_search=after_search)
             rival = self._rival_instead(effects, params, cand, step, base)
             if rival is not None and accept(rival, base):
@@ -298,13 +248,13 @@ class Discoverer:
         return effects, params, held_err
 
     def _rival_instead(
-        self, effects: list[Any], params: list[FloatArray], cand: Any, step: _Step, base: _Base
-    ) -> _Step | None:
+        self, effects: list[Any], params: list[FloatArray], cand: Any, step: Step, base: Base
+    ) -> Step | None:
         """The step of ``cand``'s ``rival`` where ``cand`` yields to it (``yields``: its own
         rule, from both fits), marked as standing for what the recording shows; None where
         it has no rival, the rival is in the model already, or it does not yield."""
         rival = getattr(cand, "rival", None)
-        if rival is None or any(_same(rival, e) for e in effects):
+        if rival is None or any(same(rival, e) for e in effects):
             return None
         other = self._single(effects, params, rival, base)
         own, its = step.new()[0][1], other.new()[0][1]
@@ -322,7 +272,7 @@ class Discoverer:
             if getattr(c, "declared", False) and all(c is not e for e in effects)
         ]
 
-    def _with_declared(self, effects: list[Any], singles: list[_Step], base: _Base) -> list[_Step]:
+    def _with_declared(self, effects: list[Any], singles: list[Step], base: Base) -> list[Step]:
         """The best few single candidates each with every declared effect not yet in the
         model (nothing fitted for those): a declared effect is tried alone before the search
         and after each effect found, but a large missing effect may hide it until both are
@@ -351,10 +301,10 @@ class Discoverer:
         effects: list[Any],
         params: list[FloatArray],
         cand: Any,
-        base: _Base,
+        base: Base,
         *,
         after_search: bool = False,
-    ) -> _Step:
+    ) -> Step:
         """``cand`` added to the effects found so far: its own parameters fitted, then all of
         them together (an effect found earlier may have stood in for part of this one)."""
         self.progress(f"trying {cand.name}")
@@ -374,17 +324,17 @@ class Discoverer:
         params: list[FloatArray],
         added: list[Any],
         result: Any,
-        base: _Base,
+        base: Base,
         *,
         after_search: bool = False,
-    ) -> _Step:
+    ) -> Step:
         err = self.problem.error([*effects, *added], params, True)
         err_rmse = rmse(err)
-        size = _total(params[: len(effects)]) + sum(
+        size = total(params[: len(effects)]) + sum(
             parameter_count(a, p) for a, p in zip(added, params[len(effects) :], strict=True)
         )
         before, after, floor = judged = self._judged(added, base, err, after_search)
-        return _Step(
+        return Step(
             added=added,
             params=params,
             err=err,
@@ -400,7 +350,7 @@ class Discoverer:
         )
 
     def _judged(
-        self, added: list[Any], base: _Base, err: FloatArray, after_search: bool = False
+        self, added: list[Any], base: Base, err: FloatArray, after_search: bool = False
     ) -> tuple[float, float, float]:
         """(RMSE before, after, floor) of the held-out error ``added`` is judged on: all of
         it; for effects of one sensor's readings (``sensor_scope`` of the problem), and when
@@ -416,7 +366,7 @@ class Discoverer:
         mask, floor = scope
         return rmse(base.err[mask]), rmse(err[mask]), floor
 
-    def _names(self, step: _Step, base: _Base) -> bool:
+    def _names(self, step: Step, base: Base) -> bool:
         """Whether ``step`` names its effects: it removes at least ``min_improvement`` of the
         held-out error above the noise floor, a tenth of the floor at least (both on the error
         it is judged on, see _judged), improves the information criterion by 10, every effect
@@ -434,7 +384,7 @@ class Discoverer:
         )
 
     @staticmethod
-    def _null_inside(step: _Step) -> bool:
+    def _null_inside(step: Step) -> bool:
         """Whether the 95 % interval of an added effect holds its value of no effect
         (``null``: no backlash, no delay; NaN: any value, cogging's phase) for every
         parameter: the data do not tell it from nothing, however much the fitted value
@@ -458,7 +408,7 @@ class Discoverer:
                 return True
         return False
 
-    def _choose(self, steps: list[_Step]) -> _Step | None:
+    def _choose(self, steps: list[Step]) -> Step | None:
         """The best step by the information criterion. Steps that explain the held-out data
         alike (within 5 % RMSE) cannot be told apart here: the one with the fewest parameters
         is named, the others are listed as alternatives. Between steps of as many parameters,
@@ -496,19 +446,19 @@ class Discoverer:
         self,
         effects: list[Any],
         params: list[FloatArray],
-        singles: list[_Step],
-        base: _Base,
-    ) -> list[_Step]:
+        singles: list[Step],
+        base: Base,
+    ) -> list[Step]:
         """Two candidates added together, all parameters fitted jointly from each one's own
         fit: two effects that are both missing may each explain too little alone
         (one stands in for the other)."""
         n = len(effects)
         ranked = sorted(singles, key=lambda c: c.rmse)  # a pair lists the better one first
-        fitted: list[tuple[float, _Step, _Step, list[FloatArray], Any]] = []
+        fitted: list[tuple[float, Step, Step, list[FloatArray], Any]] = []
         for i, first in enumerate(ranked):
             for second in ranked[i + 1 :]:
                 added = [*first.added, *second.added]
-                if any(_same(a, b) for a in first.added for b in second.added):
+                if any(same(a, b) for a in first.added for b in second.added):
                     continue
                 self.progress(f"trying {' + '.join(c.name for c in added)}")
                 x0 = [*params, *(x for _, x in first.new()), *(x for _, x in second.new())]
@@ -541,7 +491,7 @@ class Discoverer:
             out.append(step)
         return out
 
-    def _finding(self, cand: Any, step: _Step, base: _Base, before: float, after: float) -> Finding:
+    def _finding(self, cand: Any, step: Step, base: Base, before: float, after: float) -> Finding:
         x = step.params[len(step.params) - len(step.added) + step.added.index(cand)]
         if hasattr(cand, "measured_interval"):  # read off the recording
             ci = cand.measured_interval()

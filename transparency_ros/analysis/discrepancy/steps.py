@@ -1,0 +1,61 @@
+"""What the discovery loop (:mod:`discover`) compares: the held-out error a round starts from
+(:class:`Base`), one or two candidates added to the model with all parameters (:class:`Step`),
+and which candidates are variants of one effect (:func:`same`)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from transparency_ros.analysis.discrepancy.model import FloatArray
+
+
+@dataclass
+class Base:
+    """The held-out error a round starts from."""
+
+    err: FloatArray
+    rmse: float
+    aic: float
+    floor: float  # the noise floor
+
+
+@dataclass
+class Step:
+    """One or two candidate effects added to those found so far, with all parameters."""
+
+    added: list[Any]
+    params: list[FloatArray]  # of the effects found so far, then of ``added``
+    err: FloatArray  # held-out
+    rmse: float
+    aic: float
+    gain: float  # share of the held-out error above the noise floor it removes
+    judged: tuple[float, float, float]  # (RMSE before, after, floor) the gain is judged on
+    result: Any  # the least-squares fit behind the parameters
+    meaningful: bool
+    joint: bool = False  # ``result`` fitted every parameter, not only those of ``added``
+    alone_rmse: list[float] = field(default_factory=list)  # a pair: the first member alone
+    alone_aic: list[float] = field(default_factory=list)  # a pair: each member alone
+    alternatives: list[str] = field(default_factory=list)
+    shown: bool = False  # stands for a declared effect the recording shows (see _each_added)
+
+    def new(self) -> list[tuple[Any, FloatArray]]:
+        return list(zip(self.added, self.params[len(self.params) - len(self.added) :], strict=True))
+
+
+def not_named(remaining: list[Any], effects: list[Any]) -> list[Any]:
+    """The candidates of ``remaining`` none of whose variants is among ``effects``."""
+    return [c for c in remaining if not any(same(c, e) for e in effects)]
+
+
+def total(params: Sequence[FloatArray]) -> int:
+    return sum(p.size for p in params)
+
+
+def same(a: Any, b: Any) -> bool:
+    """Whether two candidates are variants of one effect (a band with its start fitted, and
+    with the arm on its far flank): once one is named the others leave the search, and they
+    are never paired. Variants are told by name, so the contact spring and the hub-arm spring
+    (both ``structural_compliance``) are variants too."""
+    return bool(a.name == b.name)
