@@ -160,7 +160,9 @@ def test_an_estimator_that_missed_the_command_uses_the_drivers_setpoint(nodes: A
     start, probe = nodes
     start("actuator_driver", channel="setpoints_late_estimator", publish_rate_hz=500.0)
     assert wait_for(lambda: len(probe.states) > 50, 20.0), "no /joint_states"
-    one_shot_until(["joint"], 0.7, lambda: abs(last_setpoint(probe) - 0.7) < 1e-6)
+    # (heard: the setpoint on its way; under load the driver's 0.5 s command watchdog may hold
+    # it short of 0.7, at the velocity limit's pace: 0.68 beside four CPU hogs)
+    one_shot_until(["joint"], 0.7, lambda: abs(last_setpoint(probe) - 0.7) < 0.05)
     assert wait_for(lambda: abs(list(probe.states.values())[-1].position[0] - 0.7) < 0.05, 5.0)
     estimator = start("contact_estimator")
     assert wait_for(lambda: len(probe.estimates) > 200, 20.0), "no /estimated_effort"
@@ -220,7 +222,7 @@ def test_a_clamped_command_is_a_visible_disagreement(nodes: Any) -> None:
     # both must hear it: a publisher that has matched a reader may still be unknown to it, so
     # a single message can be lost even then; five, and again until the driver has applied it
     # (clamped), then the status after them
-    one_shot_until(["joint"], 0.7, lambda: abs(last_setpoint(probe) - 0.4) < 1e-6,
+    one_shot_until(["joint"], 0.7, lambda: abs(last_setpoint(probe) - 0.4) < 0.05,
                    subscribers=2, times=5)  # fmt: skip
     probe.diagnostics.clear()
     assert wait_for(lambda: "differs from the last /joint_commands" in probe.estimator_message(),
