@@ -131,7 +131,6 @@ class Discoverer:
                 self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
             effects = [*effects, *step.added]
             params, held_err = step.params, step.err
-            remaining = [c for c in remaining if not any(same(c, a) for a in step.added)]
             if step.joint:  # every parameter refitted: the findings' values and intervals
                 intervals = interval(step.result, step.result.x)
                 update_findings(report, effects, params, intervals)
