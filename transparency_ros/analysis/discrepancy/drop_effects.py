@@ -275,10 +275,17 @@ class ShownRestitution(DropRestitution):
     in 37 (on the fresh seeds 9700-9799 the rebound had taken the ring in 12 of 16); of 91
     without one it took it in 4, all rebounds off a soft contact whose answers allow a spring.
     Campaigns with a backlash that threw the shuttle were explained alike by a spring too,
-    but a heavily damped one (0.11-0.25): a throw, not a ring."""
+    but a heavily damped one (0.11-0.25): a throw, not a ring.
+
+    ``RING_ALIKE`` was 1.02; it is set from the ratio's spread on 143 development campaigns
+    whose load cell showed a bounce (seeds 9800-9899, 20000-20299). Where the other two hold
+    (a soft contact, a ringing spring), the ratio of the 39 with a hidden spring ran 0.72-1.08
+    (one at 1.93: a rebound hidden with it), 8 of them above 1.02; of the 6 without, the one
+    whose answers refuse a spring was at 1.14 (a rebound fitted at e 0.001: no rebound), the
+    5 whose answers allow one at 0.80-1.02."""
 
     shown = True
-    RING_ALIKE = 1.02  # the spring's held-out RMSE at most this times the rebound's
+    RING_ALIKE = 1.10  # the spring's held-out RMSE at most this times the rebound's
     SOFT_CONTACT = 5.8  # log10 N/m: the rebound's contact softer than this
     RINGS = 0.1  # the spring's damping ratio below this
 
