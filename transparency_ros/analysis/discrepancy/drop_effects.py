@@ -279,10 +279,10 @@ class ShownRestitution(DropRestitution):
 
     ``RING_ALIKE`` was 1.02; it is set from the ratio's spread on 143 development campaigns
     whose load cell showed a bounce (seeds 9800-9899, 20000-20299). Where the other two hold
-    (a soft contact, a ringing spring), the ratio of the 39 with a hidden spring ran 0.72-1.08
-    (one at 1.93: a rebound hidden with it), 8 of them above 1.02; of the 6 without, the one
-    whose answers refuse a spring was at 1.14 (a rebound fitted at e 0.001: no rebound), the
-    5 whose answers allow one at 0.80-1.02."""
+    (a soft contact, a ringing spring), the ratio of 38 of the 39 with a hidden spring ran
+    0.72-1.08, 7 of them above 1.02 (the 39th, at 1.93, hides a rebound with its spring); of
+    the 6 without, the one whose answers refuse a spring was at 1.14 (a rebound fitted at
+    e 0.001: no rebound), the 5 whose answers allow one at 0.80-1.02."""
 
     shown = True
     RING_ALIKE = 1.10  # the spring's held-out RMSE at most this times the rebound's
