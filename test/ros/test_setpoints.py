@@ -80,13 +80,6 @@ def one_shot_until(
     raise AssertionError(f"{tries} one-shot commands of {position} to {names}: none was heard")
 
 
-def last_setpoint(probe: Probe, joint: str = "joint") -> float:
-    if not probe.setpoints:
-        return float("nan")
-    msg = list(probe.setpoints.values())[-1]
-    return float(msg.position[list(msg.name).index(joint)])
-
-
 class Probe:
     def __init__(self, context: Context) -> None:
         self.node = Node("setpoint_probe", context=context)
@@ -103,6 +96,13 @@ class Probe:
         sub(WrenchStamped, "/contact", self.contacts.append, 100)
         sub(WrenchStamped, "/contact_release", self.releases.append, 100)
         sub(DiagnosticArray, "/diagnostics", lambda m: self.diagnostics.extend(m.status), 100)
+
+    def last_setpoint(self, joint: str = "joint") -> float:
+        """The driver's latest /joint_setpoints position of ``joint`` (NaN before any)."""
+        if not self.setpoints:
+            return float("nan")
+        msg = list(self.setpoints.values())[-1]  # one call: the spinner thread adds to it
+        return float(msg.position[list(msg.name).index(joint)])
 
     def estimator_values(self) -> dict[str, str]:
         mine = [s for s in self.diagnostics if s.name.startswith("contact_estimator")]
@@ -162,7 +162,7 @@ def test_an_estimator_that_missed_the_command_uses_the_drivers_setpoint(nodes: A
     assert wait_for(lambda: len(probe.states) > 50, 20.0), "no /joint_states"
     # (heard: the setpoint on its way; under load the driver's 0.5 s command watchdog may hold
     # it short of 0.7, at the velocity limit's pace: 0.68 beside four CPU hogs)
-    one_shot_until(["joint"], 0.7, lambda: abs(last_setpoint(probe) - 0.7) < 0.05)
+    one_shot_until(["joint"], 0.7, lambda: abs(probe.last_setpoint() - 0.7) < 0.05)
     assert wait_for(lambda: abs(list(probe.states.values())[-1].position[0] - 0.7) < 0.05, 5.0)
     estimator = start("contact_estimator")
     assert wait_for(lambda: len(probe.estimates) > 200, 20.0), "no /estimated_effort"
@@ -222,7 +222,7 @@ def test_a_clamped_command_is_a_visible_disagreement(nodes: Any) -> None:
     # both must hear it: a publisher that has matched a reader may still be unknown to it, so
     # a single message can be lost even then; five, and again until the driver has applied it
     # (clamped), then the status after them
-    one_shot_until(["joint"], 0.7, lambda: abs(last_setpoint(probe) - 0.4) < 0.05,
+    one_shot_until(["joint"], 0.7, lambda: abs(probe.last_setpoint() - 0.4) < 0.05,
                    subscribers=2, times=5)  # fmt: skip
     probe.diagnostics.clear()
     assert wait_for(lambda: "differs from the last /joint_commands" in probe.estimator_message(),

@@ -270,12 +270,12 @@ class ShownRestitution(DropRestitution):
     gives way to the spring (``yields``) where the spring alone explains the held-out
     recordings within ``RING_ALIKE`` of the rebound alone, the rebound needed a contact
     softer than ``SOFT_CONTACT`` and the spring rings (damping ratio below ``RINGS``: its
-    swing shrinks by less than half each cycle). Measured on 138 development campaigns of the
-    zoo whose load cell showed a bounce: of 47 with a hidden hub spring this took the spring
-    in 37 (on the fresh seeds 9700-9799 the rebound had taken the ring in 12 of 16); of 91
-    without one it took it in 4, all rebounds off a soft contact whose answers allow a spring.
-    Campaigns with a backlash that threw the shuttle were explained alike by a spring too,
-    but a heavily damped one (0.11-0.25): a throw, not a ring.
+    swing shrinks by less than half each cycle). Measured with ``RING_ALIKE`` at 1.02 on 138
+    development campaigns of the zoo whose load cell showed a bounce: of 47 with a hidden hub
+    spring this took the spring in 37 (on the fresh seeds 9700-9799 the rebound had taken the
+    ring in 12 of 16); of 91 without one it took it in 4, all rebounds off a soft contact whose
+    answers allow a spring. Campaigns with a backlash that threw the shuttle were explained
+    alike by a spring too, but a heavily damped one (0.11-0.25): a throw, not a ring.
 
     ``RING_ALIKE`` was 1.02; it is set from the ratio's spread on 143 development campaigns
     whose load cell showed a bounce (seeds 9800-9899, 20000-20299). Where the other two hold
