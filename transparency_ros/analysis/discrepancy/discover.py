@@ -20,7 +20,9 @@ it reduced most, and the trial and time window of the largest reduction) and the
 Effects whose size the recording declares (the shuttle's weight: ``declared``) are not searched
 for: each is added, nothing fitted, where it improves the held-out fit, before the search and
 after each finding. A 95 % interval holding an effect's null value (``null``) names nothing;
-intervals are widened by the problem's ``model_error_share`` of the value at the end. What
+intervals are widened by the problem's ``model_error_share`` of the value at the end. A
+problem with a second channel (``force_view``: a drop test's load cell while the shuttle rides
+the arm) has the candidates not named searched once more there, the effects found held. What
 is left is checked for structure (phase RMS against the noise floor, its dominant frequency, how
 much of it the state explains, the closest candidate) and reported as ``unexplained``, never
 forced onto a label.
@@ -38,10 +40,9 @@ import numpy as np
 from transparency_ros.analysis.discrepancy.effects import Effect
 from transparency_ros.analysis.discrepancy.findings import (
     LEFTOVER,
-    Finding,
     Report,
+    finding,
     leftover,
-    locate,
     update_findings,
     widen,
 )
@@ -90,7 +91,6 @@ class Discoverer:
         report.heldout_rmse_nominal = rmse(held_err)
         remaining = [c for c in problem.candidates() if not getattr(c, "declared", False)]
         floor = problem.noise_floor()
-        closest: Step | None = None
         # effects whose size the recording declares (no parameter fitted) come first, each
         # named where it improves the held-out fit: known physics is in the model before
         # anything is searched for (a fitted constant torque would take the declared weight).
@@ -98,17 +98,52 @@ class Discoverer:
         # missing effect may hide it)
         effects, params, held_err = self._declared(report, effects, params, held_err, floor)
         remaining = not_named(remaining, effects)
+        effects, params, held_err, remaining, closest = self._search(
+            report, effects, params, held_err, remaining
+        )
+        effects, params, held_err = self._checked_last(
+            report, effects, params, held_err, remaining=remaining, floor=floor
+        )
+        effects, params, held_err = self._on_load_cell(report, effects, params, held_err)
+        report.fitted = list(zip(effects, params, strict=True))
+        widen(report, getattr(problem, "model_error_share", 0.0))
+        report.final_heldout_rmse = rmse(held_err)
+        report.unexplained = leftover(
+            problem,
+            held_err,
+            effects,
+            params,
+            None if closest is None else (" + ".join(c.name for c in closest.added), closest.gain),
+        )
+        report.seconds = time.perf_counter() - started
+        return report
+
+    def _search(
+        self,
+        report: Report,
+        effects: list[Any],
+        params: list[FloatArray],
+        held_err: FloatArray,
+        remaining: list[Any],
+    ) -> tuple[list[Any], list[FloatArray], FloatArray, list[Any], Step | None]:
+        """Rounds of the search from the model (effects, parameters, held-out error) until no
+        structure is left or nothing names: (effects, parameters, held-out error, the
+        candidates not named, the closest refused step)."""
+        problem = self.problem
+        floor = problem.noise_floor()
+        declared = getattr(problem, "declared_stage", True)
+        closest: Step | None = None
         left = getattr(problem, "structure_left", lambda e: rmse(e) > SIGNIFICANT * floor)
         while remaining and left(held_err):
             base = Base(held_err, rmse(held_err), aic(held_err, total(params)), floor)
             singles = [self._single(effects, params, cand, base) for cand in remaining]
             step = self._choose([s for s in singles if self._names(s, base)])
-            if step is None:
+            if step is None and declared:
                 # a declared effect a large missing one hid: the two together
                 step = self._choose(
                     [s for s in self._with_declared(effects, singles, base) if self._names(s, base)]
                 )
-            if step is None and base.rmse > LEFTOVER * floor:
+            if step is None and base.rmse > LEFTOVER * floor and getattr(problem, "pairs", True):
                 # structure is left that no single effect explains: two missing effects may
                 # each explain too little alone (one stands in for the other). Not below: a
                 # pair fitted to what is nearly noise explains noise.
@@ -134,23 +169,41 @@ class Discoverer:
             if step.joint:  # every parameter refitted: the findings' values and intervals
                 intervals = interval(step.result, step.result.x)
                 update_findings(report, effects, params, intervals)
-            effects, params, held_err = self._declared(report, effects, params, held_err, floor)
+            if declared:
+                effects, params, held_err = self._declared(report, effects, params, held_err, floor)
             remaining = not_named(remaining, effects)
-        effects, params, held_err = self._checked_last(
-            report, effects, params, held_err, remaining=remaining, floor=floor
+        return effects, params, held_err, remaining, closest
+
+    def _on_load_cell(
+        self,
+        report: Report,
+        effects: list[Any],
+        params: list[FloatArray],
+        held_err: FloatArray,
+    ) -> tuple[list[Any], list[FloatArray], FloatArray]:
+        """The candidates not named, searched once more on a second channel of the recording
+        (``force_view`` of the problem: a drop test's load cell while the shuttle rides the
+        arm, drop_force), the effects found held: a torque of a few hundredths of a newton
+        metre the encoder shows within a count the load cell shows at tens of its noise."""
+        view = getattr(self.problem, "force_view", lambda: None)()
+        remaining = [
+            c
+            for c in not_named(list(self.problem.candidates()), effects)
+            # (what acts on the encoder's readings alone the load cell does not see)
+            if not getattr(c, "declared", False) and getattr(c, "sensor", None) is None
+        ]
+        if view is None or not remaining:
+            return effects, params, held_err
+        self.progress("searching the load cell")
+        view.start(effects, params)
+        stage = Discoverer(view, min_improvement=self.min_improvement, progress=self.progress)
+        found = len(effects)
+        effects, params, *_ = stage._search(
+            report, effects, params, view.error(effects, params, True), remaining
         )
-        report.fitted = list(zip(effects, params, strict=True))
-        widen(report, getattr(problem, "model_error_share", 0.0))
-        report.final_heldout_rmse = rmse(held_err)
-        report.unexplained = leftover(
-            problem,
-            held_err,
-            effects,
-            params,
-            None if closest is None else (" + ".join(c.name for c in closest.added), closest.gain),
-        )
-        report.seconds = time.perf_counter() - started
-        return report
+        if len(effects) == found:
+            return effects, params, held_err
+        return effects, params, self.problem.error(effects, params, True)
 
     def _declared(
         self,
@@ -263,6 +316,9 @@ class Discoverer:
         other.alternatives = [cand.alike(own, step.rmse / other.rmse)]
         return other
 
+    def _finding(self, cand: Any, step: Step, base: Base, before: float, after: float) -> Any:
+        return finding(self.problem, cand, step, base, before=before, after=after)
+
     def _pending_declared(self, effects: list[Any]) -> list[Any]:
         """The declared effects (``declared`` of a candidate) not yet in the model."""
         return [
@@ -308,7 +364,11 @@ class Discoverer:
         them together (an effect found earlier may have stood in for part of this one)."""
         self.progress(f"trying {cand.name}")
         x, result = fit_candidate(self.problem, effects, params, cand)
-        joint, together = refit(self.problem, [*effects, cand], [*params, x])
+        joint, together = (
+            refit(self.problem, [*effects, cand], [*params, x])
+            if getattr(self.problem, "joint_refit", True)
+            else ([*params, x], None)
+        )
         if together is None:
             return self._step(
                 effects, [*params, x], [cand], result, base, after_search=after_search
@@ -343,9 +403,12 @@ class Discoverer:
             gain=float((before - after) / max(before - floor, 1e-12)),
             judged=judged,
             result=result,
+            # (and, where the problem says which, not at the cost of what it does not judge:
+            # a load-cell fit that worsens the kinematics, drop_force)
             meaningful=all(
                 a.meaningful(p) for a, p in zip(added, params[len(effects) :], strict=True)
-            ),
+            )
+            and getattr(self.problem, "accepts", lambda _e, _p: True)([*effects, *added], params),
         )
 
     def _judged(
@@ -489,51 +552,6 @@ class Discoverer:
             step.alone_aic = [first.aic, second.aic]
             out.append(step)
         return out
-
-    def _finding(self, cand: Any, step: Step, base: Base, before: float, after: float) -> Finding:
-        x = step.params[len(step.params) - len(step.added) + step.added.index(cand)]
-        if hasattr(cand, "measured_interval"):  # read off the recording
-            ci = cand.measured_interval()
-        elif not getattr(cand, "fittable", True) or step.joint:
-            # declared (a point), or set from the joint fit afterwards
-            ci = [(float(v), float(v)) for v in x]
-        else:
-            ci = interval(step.result, x)
-        together = [a.name for a in step.added if a is not cand]
-        read_off = hasattr(cand, "describe")
-        judged_before, judged_after, judged_floor = step.judged
-        judged = (
-            f"; judged on the encoder: {judged_before:.4g} -> {judged_after:.4g} rad "
-            f"(its floor {judged_floor:.3g} rad)"
-            if judged_floor != base.floor
-            else ""
-        )
-        return Finding(
-            effect=cand.name,
-            parameters={n: float(v) for n, v in zip(cand.param_names, x, strict=True)}
-            | cand.extra_parameters(x),
-            confidence_interval={n: c for n, c in zip(cand.param_names, ci, strict=True)},
-            where=locate(self.problem, base.err, step.err),
-            evidence=(
-                f"held-out simulation RMSE {before:.4g} -> {after:.4g} rad "
-                f"({100 * (1 - after / before):.0f} % lower) with {x.size} parameter(s)"
-                + (f"; read off the recording: {cand.describe()}" if read_off else "")
-                + judged
-                + (
-                    f"; found together with {', '.join(together)} (neither explains it alone)"
-                    if together
-                    else ""
-                )
-                + (
-                    f"; explained alike by {', '.join(step.alternatives)}"
-                    if step.alternatives
-                    else ""
-                )
-            ),
-            heldout_rmse_before=before,
-            heldout_rmse_after=after,
-            alternatives=list(step.alternatives),
-        )
 
 
 def discover(

@@ -47,6 +47,7 @@ from transparency_ros.analysis.discrepancy.drop_effects import (
     DropEffect,
     drop_library,
 )
+from transparency_ros.analysis.discrepancy.drop_force import ForceView, force_view
 from transparency_ros.analysis.discrepancy.drop_physics import (
     DropNominal,
     DropPhysics,
@@ -311,6 +312,10 @@ class DropProblem:
                 )
             index.append(np.full(t.size, len(labels) - 1, dtype=np.int64))
         return np.concatenate(index), labels
+
+    def force_view(self) -> ForceView | None:
+        """The trials seen through the load cell while the shuttle rides (drop_force)."""
+        return force_view(self)
 
     def noise_floor(self) -> float:
         """RMS error sensor noise alone gives: encoder (quantization) and potentiometer noise,

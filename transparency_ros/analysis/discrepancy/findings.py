@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from transparency_ros.analysis.discrepancy.fitting import interval
 from transparency_ros.analysis.discrepancy.model import FloatArray
 from transparency_ros.analysis.discrepancy.problem import Problem
 
@@ -89,6 +90,54 @@ def locate(problem: Problem, before: FloatArray, after: FloatArray) -> dict[str,
         "trial": trial,
         "window_s": [round(t0, 4), round(t1, 4)],
     }
+
+
+def finding(
+    problem: Any, cand: Any, step: Any, base: Any, *, before: float, after: float
+) -> Finding:
+    """What the loop reports of ``cand`` named in ``step`` from ``base``: its parameters and
+    intervals, where it acted, and the evidence (held-out RMSE ``before`` -> ``after``)."""
+    x = step.params[len(step.params) - len(step.added) + step.added.index(cand)]
+    if hasattr(cand, "measured_interval"):  # read off the recording
+        ci = cand.measured_interval()
+    elif not getattr(cand, "fittable", True) or step.joint:
+        # declared (a point), or set from the joint fit afterwards
+        ci = [(float(v), float(v)) for v in x]
+    else:
+        ci = interval(step.result, x)
+    together = [a.name for a in step.added if a is not cand]
+    channel = "held-out " + getattr(problem, "channel", "simulation") + " RMSE"
+    unit = getattr(problem, "unit", "rad")
+    read_off = hasattr(cand, "describe")
+    judged_before, judged_after, judged_floor = step.judged
+    judged = (
+        f"; judged on the encoder: {judged_before:.4g} -> {judged_after:.4g} rad "
+        f"(its floor {judged_floor:.3g} rad)"
+        if judged_floor != base.floor
+        else ""
+    )
+    return Finding(
+        effect=cand.name,
+        parameters={n: float(v) for n, v in zip(cand.param_names, x, strict=True)}
+        | cand.extra_parameters(x),
+        confidence_interval={n: c for n, c in zip(cand.param_names, ci, strict=True)},
+        where=locate(problem, base.err, step.err),
+        evidence=(
+            f"{channel} {before:.4g} -> {after:.4g} {unit} "
+            f"({100 * (1 - after / before):.0f} % lower) with {x.size} parameter(s)"
+            + (f"; read off the recording: {cand.describe()}" if read_off else "")
+            + judged
+            + (
+                f"; found together with {', '.join(together)} (neither explains it alone)"
+                if together
+                else ""
+            )
+            + (f"; explained alike by {', '.join(step.alternatives)}" if step.alternatives else "")
+        ),
+        heldout_rmse_before=before,
+        heldout_rmse_after=after,
+        alternatives=list(step.alternatives),
+    )
 
 
 def update_findings(

@@ -1,0 +1,123 @@
+"""The load cell while the shuttle rides the arm (drop_force): its residual in its own
+uncertainty, and the loop's last stage, which searches it for what the encoder does not show."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from transparency_ros.analysis.discrepancy.discover import Discoverer
+from transparency_ros.analysis.discrepancy.drop import (
+    DropProblem,
+    load_drop_nominal,
+    load_drop_trial,
+)
+from transparency_ros.analysis.discrepancy.drop_force import FORCE_SIGNIFICANT, ForceView
+from transparency_ros.analysis.discrepancy.findings import Report
+from transparency_ros.bag.reader import find_bags
+from transparency_ros.synth.drop_campaign import write_drop_campaign
+
+
+def _problem(tmp_path: Path) -> DropProblem:
+    out = write_drop_campaign(tmp_path / "c", 3, hidden=["payload_gravity"], actuator="EC60")
+    trials = [load_drop_trial(b) for b in find_bags([str(out / "bags")])]
+    return DropProblem(trials, load_drop_nominal(None, trials))
+
+
+def _named(problem: DropProblem, name: str) -> object:
+    return next(c for c in problem.candidates() if c.name == name)
+
+
+def _self_simulated(problem: DropProblem, **changes: float) -> ForceView:
+    """The problem's load-cell view with its measured bins, and the problem's encoder and
+    height readings, replaced by the tool's own simulation (the shuttle's weight on, and
+    ``changes`` to its physics), plus noise (of one uncertainty in the bins)."""
+    weight = _named(problem, "payload_gravity")
+    rng = np.random.default_rng(11)
+    for s in (problem.fit, problem.held):  # the encoder and heights alike
+        ph = problem.physics([weight], [problem.initial(weight)], s.trials)
+        t_sim, q_sim, y_sim = s.sim.run(replace(ph, **changes))
+        for i, ((t_q, _q), (t_h, _h)) in enumerate(zip(s.q, s.h, strict=True)):
+            s.q[i] = (t_q, np.interp(t_q, t_sim, q_sim[i]) + rng.normal(0, 2e-5, t_q.size))
+            s.h[i] = (t_h, np.interp(t_h, t_sim, y_sim[i]) + rng.normal(0, 2e-5, t_h.size))
+    view = ForceView(problem)
+    for bins in (view.fit, view.held):
+        ph = problem.physics([weight], [problem.initial(weight)], bins.trials)
+        residual = bins.error_many([replace(ph, **changes)])[0]
+        k = 0
+        for i, sigma in enumerate(bins.sigma):
+            n = sigma.size
+            model = bins.measured[i] - residual[k : k + n] * sigma
+            bins.measured[i] = model + rng.normal(0.0, 1.0, n) * sigma
+            k += n
+    return view
+
+
+def test_the_ride_is_compared_in_its_uncertainty_from_after_the_strike(tmp_path: Path) -> None:
+    """Bins start after the strike's pulse, inside the recording, with positive
+    uncertainties; the tool's own simulation plus noise of one uncertainty reads as about one
+    uncertainty (no structure), and a torque of 0.05 N m on the arm as structure."""
+    problem = _problem(tmp_path)
+    view = _self_simulated(problem)
+    weight = _named(problem, "payload_gravity")
+    for bins in (view.fit, view.held):
+        assert bins.size >= 10
+        for trial, times, sigma in zip(bins.trials, bins.times, bins.sigma, strict=True):
+            assert times[0] > trial.contact_s and times[-1] < trial.end_s
+            assert np.all(sigma > 0)
+    err = view.error([weight], [problem.initial(weight)], True)
+    assert 0.7 < float(np.sqrt(np.mean(err**2))) < 1.3
+    assert not view.structure_left(err)
+    offset = _named(problem, "torque_offset")
+    pushed = view.error([weight, offset], [problem.initial(weight), np.array([0.05])], True)
+    assert float(np.sqrt(np.mean(pushed**2))) > FORCE_SIGNIFICANT
+
+
+def test_a_cogging_the_encoder_cannot_show_is_named_on_the_load_cell(tmp_path: Path) -> None:
+    """The loop's last stage on a load cell that shows a cogging wave (N = 70, 0.03 N m):
+    cogging is named there with its period within 2 and its size within 10 %, its evidence
+    says the load cell, and the effect found before (the weight) keeps its value."""
+    problem = _problem(tmp_path)
+    view = _self_simulated(problem, cogging_nm=0.03, cogging_periods=70.0, cogging_phase_rad=0.8)
+    problem.force_view = lambda: view  # type: ignore[method-assign]
+    weight = _named(problem, "payload_gravity")
+    report = Report(problem.nominal, problem.split)
+    before = problem.error([weight], [problem.initial(weight)], True)
+    effects, params, held = Discoverer(problem)._on_load_cell(
+        report, [weight], [problem.initial(weight)], before
+    )
+    assert [e.name for e in effects] == ["payload_gravity", "cogging"]
+    assert np.array_equal(params[0], problem.initial(weight))
+    assert abs(report.findings[-1].parameters["periods_per_rev"] - 70) <= 2
+    assert report.findings[-1].parameters["amplitude_nm"] == pytest.approx(0.03, rel=0.1)
+    assert "load cell" in report.findings[-1].evidence
+    assert held.shape == before.shape
+
+
+def test_nothing_is_named_on_a_load_cell_that_shows_nothing(tmp_path: Path) -> None:
+    problem = _problem(tmp_path)
+    view = _self_simulated(problem)
+    problem.force_view = lambda: view  # type: ignore[method-assign]
+    weight = _named(problem, "payload_gravity")
+    report = Report(problem.nominal, problem.split)
+    before = problem.error([weight], [problem.initial(weight)], True)
+    effects, _, held = Discoverer(problem)._on_load_cell(
+        report, [weight], [problem.initial(weight)], before
+    )
+    assert [e.name for e in effects] == ["payload_gravity"] and not report.findings
+    assert held is before
+
+
+def test_an_effect_that_worsens_the_kinematics_is_not_meaningful_there(tmp_path: Path) -> None:
+    """What the load cell alone would name must not cost the encoder and heights more than
+    KINEMATICS_KEPT: a large offset is refused, none is accepted."""
+    problem = _problem(tmp_path)
+    view = ForceView(problem)
+    weight = _named(problem, "payload_gravity")
+    offset = _named(problem, "torque_offset")
+    view.start([weight], [problem.initial(weight)])
+    assert view.accepts([weight, offset], [problem.initial(weight), np.array([0.0])])
+    assert not view.accepts([weight, offset], [problem.initial(weight), np.array([0.3])])
