@@ -96,7 +96,8 @@ class _Bins:
 
 
 def _noise(trial: DropTrial) -> float | None:
-    """The load cell's noise in 1 ms means, from the fall (None: too little of it recorded)."""
+    """The load cell's noise in 1 ms means, from the fall (None: too little of it recorded, or
+    no variation in it)."""
     end = trial.contact_s - 0.005
     sel = (trial.t_h >= end - NOISE_WINDOW_S) & (trial.t_h < end)
     f, t = trial.force[sel], trial.t_h[sel]
@@ -105,7 +106,9 @@ def _noise(trial: DropTrial) -> float | None:
     k = np.floor((t - t[0]) / BIN_S).astype(np.int64)
     means = np.bincount(k, f) / np.maximum(np.bincount(k), 1)
     means = means[np.bincount(k) > 0]
-    return float(np.std(means)) if means.size >= 5 else None
+    noise = float(np.std(means)) if means.size >= 5 else 0.0
+    # (a load cell that reads one value through the fall does not tell its noise)
+    return noise if noise > 0.0 else None
 
 
 class ForceView:
