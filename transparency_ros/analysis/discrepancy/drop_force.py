@@ -6,8 +6,8 @@ metre moves it by tenths of a newton: tens of times its noise in 1 ms means. The
 the same torque only through what it does to the angle within a short swing, which may be
 less than a count. On the zoo's development campaigns (seeds 9800-9999) a cogging no
 kinematic fit could find left the ride's load-cell residual at 4-10x its noise after the
-shuttle's weight, and the true cogging brought it back to 0.8-1.9x; effect-free campaigns
-stood at 0.6-3.1x (one at 7x).
+shuttle's weight, and the true cogging brought it back to 0.8-1.9x (4.7x in one whose
+contact law the model lacks); effect-free campaigns stood at 0.6-3.1x (one at 7x).
 
 :class:`ForceView` is a drop-test problem seen through this residual, for the loop's last
 stage (``Discoverer``: after the kinematic search, the effects it did not name are tried on
