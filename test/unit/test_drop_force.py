@@ -56,6 +56,21 @@ def _self_simulated(problem: DropProblem, **changes: float) -> ForceView:
     return view
 
 
+def _last_stage(
+    problem: DropProblem, view: ForceView
+) -> tuple[Report, list[object], list[np.ndarray], np.ndarray, np.ndarray]:
+    """The loop's last stage on ``view``, the shuttle's weight found before it: (report,
+    effects, parameters, held-out error after, held-out error before)."""
+    problem.force_view = lambda: view  # type: ignore[method-assign]
+    weight = _named(problem, "payload_gravity")
+    report = Report(problem.nominal, problem.split)
+    before = problem.error([weight], [problem.initial(weight)], True)
+    effects, params, held = Discoverer(problem)._on_load_cell(
+        report, [weight], [problem.initial(weight)], before
+    )
+    return report, effects, params, held, before
+
+
 def test_the_ride_is_compared_in_its_uncertainty_from_after_the_strike(tmp_path: Path) -> None:
     """Bins start after the strike's pulse, inside the recording, with positive
     uncertainties; the tool's own simulation plus noise of one uncertainty reads as about one
@@ -82,15 +97,9 @@ def test_a_cogging_the_encoder_cannot_show_is_named_on_the_load_cell(tmp_path: P
     says the load cell, and the effect found before (the weight) keeps its value."""
     problem = _problem(tmp_path)
     view = _self_simulated(problem, cogging_nm=0.03, cogging_periods=70.0, cogging_phase_rad=0.8)
-    problem.force_view = lambda: view  # type: ignore[method-assign]
-    weight = _named(problem, "payload_gravity")
-    report = Report(problem.nominal, problem.split)
-    before = problem.error([weight], [problem.initial(weight)], True)
-    effects, params, held = Discoverer(problem)._on_load_cell(
-        report, [weight], [problem.initial(weight)], before
-    )
+    report, effects, params, held, before = _last_stage(problem, view)
     assert [e.name for e in effects] == ["payload_gravity", "cogging"]
-    assert np.array_equal(params[0], problem.initial(weight))
+    assert np.array_equal(params[0], problem.initial(_named(problem, "payload_gravity")))
     assert abs(report.findings[-1].parameters["periods_per_rev"] - 70) <= 2
     assert report.findings[-1].parameters["amplitude_nm"] == pytest.approx(0.03, rel=0.1)
     assert "load cell" in report.findings[-1].evidence
@@ -99,14 +108,7 @@ def test_a_cogging_the_encoder_cannot_show_is_named_on_the_load_cell(tmp_path: P
 
 def test_nothing_is_named_on_a_load_cell_that_shows_nothing(tmp_path: Path) -> None:
     problem = _problem(tmp_path)
-    view = _self_simulated(problem)
-    problem.force_view = lambda: view  # type: ignore[method-assign]
-    weight = _named(problem, "payload_gravity")
-    report = Report(problem.nominal, problem.split)
-    before = problem.error([weight], [problem.initial(weight)], True)
-    effects, _, held = Discoverer(problem)._on_load_cell(
-        report, [weight], [problem.initial(weight)], before
-    )
+    report, effects, _, held, before = _last_stage(problem, _self_simulated(problem))
     assert [e.name for e in effects] == ["payload_gravity"] and not report.findings
     assert held is before
 
