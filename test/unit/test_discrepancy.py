@@ -5,15 +5,18 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from transparency_ros.analysis.discrepancy.discover import discover
+from transparency_ros.analysis.discrepancy.discover import Discoverer, discover
 from transparency_ros.analysis.discrepancy.drop_effects import DropRestitution, HubArmCompliance
 from transparency_ros.analysis.discrepancy.effects import ParameterDrift, library
 from transparency_ros.analysis.discrepancy.findings import Finding, Report, parameters_text, widen
+from transparency_ros.analysis.discrepancy.fitting import held_at
 from transparency_ros.analysis.discrepancy.model import Trial, load_nominal
+from transparency_ros.analysis.discrepancy.steps import Step
 from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.synth.campaign import OUTSIDE, write_campaign
@@ -275,3 +278,38 @@ def test_widen_logs_in_their_natural_unit_and_derived_values_follow() -> None:
     assert f_lo < effect.extra_parameters(p)["compliance_hz"] < f_hi
     assert f_hi / f_lo == pytest.approx(np.sqrt(10 ** (hi - lo)))
     assert "compliance_hz 50.33 (95 % " in parameters_text(report.findings[0])
+
+
+def test_a_parameter_held_at_its_null_bound_is_not_told_from_nothing() -> None:
+    """A rebound whose fit ends on e = 0 (the bound of its range and its null value) has a
+    zero-width interval there, 0.000 (0.000 to 0.000): that is no rebound, not one measured
+    exactly. The same coefficient fitted inside its range with an interval away from 0
+    is told from nothing."""
+    rebound = DropRestitution()
+    lower, upper = np.array(rebound.lower), np.array(rebound.upper)
+    rng = np.random.default_rng(0)
+    jac = rng.normal(size=(400, 2))
+
+    def step(e: float) -> Step:
+        x = np.array([e, 6.4])
+        result = SimpleNamespace(
+            x=x, jac=jac, fun=1e-4 * rng.normal(size=400), cost=1e-6, lower=lower, upper=upper
+        )
+        return Step(
+            added=[rebound],
+            params=[x],
+            err=np.zeros(1),
+            rmse=1.0,
+            aic=0.0,
+            gain=0.9,
+            judged=(1.0, 0.1, 0.01),
+            result=result,
+            meaningful=True,
+        )
+
+    at_null = step(1e-6)
+    assert held_at(at_null.result, at_null.result.x)(0, 0.0)
+    assert Discoverer._null_inside(at_null)
+    inside = step(0.3)
+    assert not held_at(inside.result, inside.result.x)(0, 0.0)
+    assert not Discoverer._null_inside(inside)

@@ -155,3 +155,16 @@ def test_a_shown_bounce_a_ringing_hub_spring_explains_alike_is_named_as_the_spri
         ((0.9, 5.2), (3.3, 0.03), 1.11),
     ):
         assert [name for name, _ in _declared_after(rebound, spring, ratio)] == ["restitution"]
+
+
+def test_a_shown_bounce_fitted_as_a_stiff_contacts_chatter_names_no_rebound() -> None:
+    """A light arm springs back and throws the shuttle off a stiff contact for a few ms: the
+    load cell shows it strike again, and the rebound fitted to it is small. Below e 0.17 it
+    is not named, whatever it gains; from there on it is, as before."""
+    assert _declared_after((0.10, 6.4), (3.3, 0.2), 1.0) == []
+    assert _declared_after((0.16, 6.4), (3.3, 0.2), 1.0) == []
+    assert [name for name, _ in _declared_after((0.25, 6.4), (3.3, 0.2), 1.0)] == ["restitution"]
+    # in the standard rule too (a pair with a searched effect): the same size is refused
+    shown = ShownRestitution(Bounces(struck_again=8, left=8, of=8, pause_s=0.008))
+    assert not shown.shows(np.array([0.1, 6.4])) and shown.shows(np.array([0.3, 6.4]))
+    assert "from e 0.17 up" in shown.unnamed

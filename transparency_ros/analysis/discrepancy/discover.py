@@ -49,6 +49,7 @@ from transparency_ros.analysis.discrepancy.findings import (
 from transparency_ros.analysis.discrepancy.fitting import (
     aic,
     fit_candidate,
+    held_at,
     interval,
     parameter_count,
     refit,
@@ -105,6 +106,11 @@ class Discoverer:
             report, effects, params, held_err, remaining=remaining, floor=floor
         )
         effects, params, held_err = self._on_load_cell(report, effects, params, held_err)
+        report.notes += [
+            f"not named: {c.describe()}; {c.unnamed}"
+            for c in self._pending_declared(effects)
+            if getattr(c, "shown", False) and hasattr(c, "unnamed")
+        ]
         report.fitted = list(zip(effects, params, strict=True))
         widen(report, getattr(problem, "model_error_share", 0.0))
         report.final_heldout_rmse = rmse(held_err)
@@ -218,7 +224,9 @@ class Discoverer:
         acting (``shown``: a drive's recorded torque held at its limit, a shuttle striking the
         arm again). What is fitted of it must be told from nothing (its 95 % interval without
         its null value): a load cell showed a shuttle chatter on a rig whose contact is nearly
-        inelastic, and the rebound fitted there was 0.007 (-0.09 to 0.10)."""
+        inelastic, and the rebound fitted there was 0.007 (-0.09 to 0.10). A shown effect
+        names itself only at a size it ``shows`` (a rebound: a coefficient that is more than
+        the chatter of a stiff contact)."""
         return self._each_added(
             report,
             (effects, params, held_err),
@@ -227,6 +235,7 @@ class Discoverer:
             lambda step, base: (
                 step.meaningful
                 and not self._null_inside(step)
+                and all(_sized(a, x) for a, x in step.new())
                 and (
                     step.shown
                     or all(getattr(a, "shown", False) for a in step.added)
@@ -432,13 +441,14 @@ class Discoverer:
         """Whether ``step`` names its effects: it removes at least ``min_improvement`` of the
         held-out error above the noise floor, a tenth of the floor at least (both on the error
         it is judged on, see _judged), improves the information criterion by 10, every effect
-        in it is meaningful (no drift scales near 1, no fit against a bound) and its interval
-        excludes its null value; a pair also beats each of its members alone by 10. A missing
-        effect that is really there explains most of what is left; one that stands in for
-        something else explains part of it."""
+        in it is meaningful (no drift scales near 1, no fit against a bound), of a size it is
+        named at (_sized) and its interval excludes its null value; a pair also beats each of
+        its members alone by 10. A missing effect that is really there explains most of what
+        is left; one that stands in for something else explains part of it."""
         return (
             step.meaningful
             and not self._null_inside(step)
+            and all(_sized(a, x) for a, x in step.new())
             and step.judged[0] - step.judged[1] >= 0.1 * step.judged[2]
             and step.gain >= self.min_improvement
             and step.aic < base.aic - 10
@@ -450,10 +460,14 @@ class Discoverer:
         """Whether the 95 % interval of an added effect holds its value of no effect
         (``null``: no backlash, no delay; NaN: any value, cogging's phase) for every
         parameter: the data do not tell it from nothing, however much the fitted value
-        removes. The fitted parameters of the added effects are the last of the fit's."""
+        removes. A parameter the fit holds at a bound of its range that is its null holds it
+        too (its interval is the bound itself): the fit would go past no effect if it could.
+        On the independent rig, rebounds fitted at e 0.000 (0.000 to 0.000) were named so.
+        The fitted parameters of the added effects are the last of the fit's."""
         if step.result is None or getattr(step.result, "jac", None) is None:
             return False
         ci = interval(step.result, step.result.x)
+        at_null = held_at(step.result, step.result.x)
         end = len(ci)
         for effect, x in reversed(step.new()):
             if not getattr(effect, "fittable", True):
@@ -464,7 +478,8 @@ class Discoverer:
                 null is not None
                 and own
                 and all(
-                    math.isnan(z) or lo <= z <= hi for (lo, hi), z in zip(own, null, strict=True)
+                    math.isnan(z) or lo <= z <= hi or at_null(end + i, z)
+                    for i, ((lo, hi), z) in enumerate(zip(own, null, strict=True))
                 )
             ):
                 return True
@@ -567,3 +582,9 @@ def discover(
         raise ModelError("no trials to analyse")
     problem = TorqueDrivenProblem(model, trials, window_s=window_s, candidates=candidates)
     return Discoverer(problem, **kwargs).run()
+
+
+def _sized(effect: Any, x: FloatArray) -> bool:
+    """Whether ``effect`` fitted at ``x`` is of a size it is named at (``shows``; any size
+    where it does not say)."""
+    return bool(getattr(effect, "shows", lambda _x: True)(x))

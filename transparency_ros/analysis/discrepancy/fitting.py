@@ -152,6 +152,21 @@ def interval(result: Any, x: FloatArray) -> list[tuple[float, float]]:
     return [(float(v - h), float(v + h)) for v, h in zip(x, half, strict=True)]
 
 
+def held_at(result: Any, x: FloatArray) -> Callable[[int, float], bool]:
+    """Whether the fit holds parameter ``i`` at a bound of its range that is ``value`` (within
+    ``BOUND_HELD`` of the range, as :func:`interval` takes it as held)."""
+    lower, upper = getattr(result, "lower", None), getattr(result, "upper", None)
+
+    def at(i: int, value: float) -> bool:
+        if lower is None or upper is None or np.size(lower) != x.size:
+            return False
+        tol = BOUND_HELD * (upper[i] - lower[i])
+        near = min(abs(x[i] - lower[i]), abs(upper[i] - x[i])) <= tol
+        return bool(near and abs(x[i] - value) <= tol)
+
+    return at
+
+
 def correlation_inflation(residual: FloatArray, k: int) -> float:
     """How much a correlated residual widens an interval's variance: (1 + rho) / (1 - rho) for
     its lag-1 autocorrelation rho, at most as if only k + 1 samples were independent."""
