@@ -260,8 +260,8 @@ class DropRestitution(DropEffect):
 
 class ShownRestitution(DropRestitution):
     """A rebound the load cell shows (:mod:`drop_bounce`): the shuttle leaves the arm and
-    strikes it again. Declared and named as shown, whatever the encoder's trace gains by it;
-    its coefficient and the contact's stiffness are fitted as for a rebound searched for.
+    strikes it again. Declared and named as shown from e ``SHOWS`` up, whatever the encoder's
+    trace gains by it; e and the contact's stiffness are fitted as for a rebound searched for.
 
     A ring of a spring between hub and arm (``rival``) throws the shuttle off too, and a soft
     contact that rebounds imitates the ring: with the arm light against the shuttle the two
@@ -293,7 +293,7 @@ class ShownRestitution(DropRestitution):
     SOFT_CONTACT = 5.8  # log10 N/m: the rebound's contact softer than this
     RINGS = 0.1  # the spring's damping ratio below this
     SHOWS = 0.17  # the least coefficient named as a rebound
-    unnamed = f"a rebound is named from e {SHOWS} up (less is a stiff contact's chatter)"
+    unnamed = f"no rebound named (one is, from e {SHOWS} up: less is a stiff contact's chatter)"
 
     def __init__(self, bounces: Bounces, rival: DropEffect | None = None) -> None:
         super().__init__()
