@@ -124,7 +124,7 @@ def _declared_after(
             gain=0.9,
             judged=(2e-3, rmse, 1e-4),
             result=None,
-            meaningful=True,
+            meaningful=cand.meaningful(fitted[id(cand)]),  # as Discoverer._step has it
         )
 
     loop = Discoverer.__new__(Discoverer)

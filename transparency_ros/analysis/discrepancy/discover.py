@@ -225,7 +225,7 @@ class Discoverer:
         arm again). What is fitted of it must be told from nothing (its 95 % interval without
         its null value): a load cell showed a shuttle chatter on a rig whose contact is nearly
         inelastic, and the rebound fitted there was 0.007 (-0.09 to 0.10). A shown effect
-        names itself only at a size it ``shows`` (a rebound: a coefficient that is more than
+        is meaningful only at a size it shows (a rebound: a coefficient that is more than
         the chatter of a stiff contact)."""
         return self._each_added(
             report,
@@ -235,7 +235,6 @@ class Discoverer:
             lambda step, base: (
                 step.meaningful
                 and not self._null_inside(step)
-                and all(_sized(a, x) for a, x in step.new())
                 and (
                     step.shown
                     or all(getattr(a, "shown", False) for a in step.added)
@@ -441,14 +440,13 @@ class Discoverer:
         """Whether ``step`` names its effects: it removes at least ``min_improvement`` of the
         held-out error above the noise floor, a tenth of the floor at least (both on the error
         it is judged on, see _judged), improves the information criterion by 10, every effect
-        in it is meaningful (no drift scales near 1, no fit against a bound), of a size it is
-        named at (_sized) and its interval excludes its null value; a pair also beats each of
+        in it is meaningful (no drift scales near 1, no fit against a bound, no rebound below
+        what it shows) and its interval excludes its null value; a pair also beats each of
         its members alone by 10. A missing effect that is really there explains most of what
         is left; one that stands in for something else explains part of it."""
         return (
             step.meaningful
             and not self._null_inside(step)
-            and all(_sized(a, x) for a, x in step.new())
             and step.judged[0] - step.judged[1] >= 0.1 * step.judged[2]
             and step.gain >= self.min_improvement
             and step.aic < base.aic - 10
@@ -582,9 +580,3 @@ def discover(
         raise ModelError("no trials to analyse")
     problem = TorqueDrivenProblem(model, trials, window_s=window_s, candidates=candidates)
     return Discoverer(problem, **kwargs).run()
-
-
-def _sized(effect: Any, x: FloatArray) -> bool:
-    """Whether ``effect`` fitted at ``x`` is of a size it is named at (``shows``; any size
-    where it does not say)."""
-    return bool(getattr(effect, "shows", lambda _x: True)(x))

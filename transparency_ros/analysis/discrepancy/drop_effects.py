@@ -281,12 +281,9 @@ class ShownRestitution(DropRestitution):
     with a hidden spring ran 0.72-1.08 (the 39th, 1.93, hides a rebound with its spring); of
     6 without, the one whose answers refuse a spring was at 1.14 (e 0.001: no rebound).
 
-    A stiff contact chatters: the arm, knocked down, springs back and throws the shuttle off
-    for 0.5-15 ms. A rebound is named from e ``SHOWS`` (``shows``): on 33 campaigns of the
-    independent rig (benchmarks/independent_rig.py, seeds 300, 302, 321, 400-439) that hid no
-    rebound and showed the shuttle strike again, e ran 0-0.11 (0.21: a backlash's throw); on
-    the zoo's 29 development campaigns that hid one, 0.25-0.90 (the rig's two: 0.65, 0.74).
-    ``SHOWS`` is the geometric middle of the gap 0.11-0.25."""
+    A stiff contact chatters: a rebound means something from e ``SHOWS`` up (0.11-0.25's
+    geometric middle: e 0-0.11 on 33 independent-rig campaigns, seeds 300, 302, 321, 400-439,
+    that hid none but showed a strike again, 0.21 a backlash's throw; 0.25-0.90 on 29 zoo)."""
 
     shown = True
     RING_ALIKE = 1.10  # the spring's held-out RMSE at most this times the rebound's
@@ -306,6 +303,9 @@ class ShownRestitution(DropRestitution):
 
     def shows(self, p: FloatArray) -> bool:
         return bool(p[0] >= self.SHOWS)
+
+    def meaningful(self, p: FloatArray) -> bool:  # (and of a size the load cell shows)
+        return self.shows(p) and super().meaningful(p)
 
     def yields(self, own: FloatArray, rival: FloatArray, ratio: float) -> bool:
         """Whether the spring (fitted ``rival``) stands for the bounce rather than this

@@ -9,6 +9,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from transparency_ros.analysis.discrepancy.model import FloatArray
@@ -134,12 +135,8 @@ def interval(result: Any, x: FloatArray) -> list[tuple[float, float]]:
     at a bound says nothing of the side the fit could not go to)."""
     if result is None or result.jac is None:
         return [(float(v), float(v)) for v in x]
-    free = np.ones(x.size, dtype=bool)
-    lower, upper = getattr(result, "lower", None), getattr(result, "upper", None)
-    if lower is not None and upper is not None and np.size(lower) == x.size:
-        # (the fit keeps x strictly inside: 1 - 2e-6 of a range of 2 is on the bound)
-        tol = BOUND_HELD * (upper - lower)
-        free = (x - lower > tol) & (upper - x > tol)
+    held = _held(result, x)
+    free = np.ones(x.size, dtype=bool) if held is None else ~held[0]
     dof = max(1, result.fun.size - int(free.sum()))
     sigma2 = 2 * result.cost / dof * correlation_inflation(result.fun, int(free.sum()))
     jac = np.asarray(result.jac)[:, free]
@@ -152,19 +149,24 @@ def interval(result: Any, x: FloatArray) -> list[tuple[float, float]]:
     return [(float(v - h), float(v + h)) for v, h in zip(x, half, strict=True)]
 
 
-def held_at(result: Any, x: FloatArray) -> Callable[[int, float], bool]:
-    """Whether the fit holds parameter ``i`` at a bound of its range that is ``value`` (within
-    ``BOUND_HELD`` of the range, as :func:`interval` takes it as held)."""
+def _held(result: Any, x: FloatArray) -> tuple[npt.NDArray[np.bool_], FloatArray] | None:
+    """Which of ``x`` the fit holds at a bound of its range (within ``BOUND_HELD`` of the
+    range), and that tolerance; None where the fit has no bounds for ``x``. (The fit keeps x
+    strictly inside: 1 - 2e-6 of a range of 2 is on the bound.)"""
     lower, upper = getattr(result, "lower", None), getattr(result, "upper", None)
+    if lower is None or upper is None or np.size(lower) != x.size:
+        return None
+    tol = BOUND_HELD * (upper - lower)
+    return (x - lower <= tol) | (upper - x <= tol), tol
 
-    def at(i: int, value: float) -> bool:
-        if lower is None or upper is None or np.size(lower) != x.size:
-            return False
-        tol = BOUND_HELD * (upper[i] - lower[i])
-        near = min(abs(x[i] - lower[i]), abs(upper[i] - x[i])) <= tol
-        return bool(near and abs(x[i] - value) <= tol)
 
-    return at
+def held_at(result: Any, x: FloatArray) -> Callable[[int, float], bool]:
+    """Whether the fit holds parameter ``i`` at a bound of its range that is ``value`` (held
+    as :func:`interval` takes it)."""
+    held = _held(result, x)
+    return lambda i, value: bool(
+        held is not None and held[0][i] and abs(x[i] - value) <= held[1][i]
+    )
 
 
 def correlation_inflation(residual: FloatArray, k: int) -> float:
