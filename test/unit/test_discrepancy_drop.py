@@ -21,8 +21,8 @@ from transparency_ros.analysis.discrepancy.drop_effects import (
     DeclaredWeight,
     DropBacklash,
     MeasuredSaturation,
-    drop_library,
 )
+from transparency_ros.analysis.discrepancy.drop_library import drop_library
 from transparency_ros.analysis.discrepancy.drop_trials import rest_position
 from transparency_ros.bag.reader import find_bags
 from transparency_ros.core import strict_json

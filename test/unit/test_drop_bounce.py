@@ -20,8 +20,8 @@ from transparency_ros.analysis.discrepancy.drop_effects import (
     DropEffect,
     HubArmCompliance,
     ShownRestitution,
-    drop_library,
 )
+from transparency_ros.analysis.discrepancy.drop_library import drop_library
 from transparency_ros.analysis.discrepancy.drop_trials import DropTrial
 from transparency_ros.analysis.discrepancy.steps import Base, Step
 from transparency_ros.bag.reader import find_bags

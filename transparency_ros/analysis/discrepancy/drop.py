@@ -42,12 +42,9 @@ import numpy.typing as npt
 
 from transparency_ros.analysis.discrepancy.drop_bounce import shuttle_bounces
 from transparency_ros.analysis.discrepancy.drop_clip import drive_clip
-from transparency_ros.analysis.discrepancy.drop_effects import (
-    LOCAL_GRAVITY_SPREAD,
-    DropEffect,
-    drop_library,
-)
+from transparency_ros.analysis.discrepancy.drop_effects import LOCAL_GRAVITY_SPREAD, DropEffect
 from transparency_ros.analysis.discrepancy.drop_force import ForceView, force_view
+from transparency_ros.analysis.discrepancy.drop_library import drop_library
 from transparency_ros.analysis.discrepancy.drop_physics import (
     DropNominal,
     DropPhysics,
@@ -218,6 +215,7 @@ class DropProblem:
                 nominal.coulomb_nm[self.actuator],
                 float(np.mean([t.loaded_inertia_kgm2 for t in trials])),
                 float(np.median(np.concatenate([np.diff(t.t_q) for t in trials]))),
+                noise_floor_rad=self.noise_floor(),
                 torques_recorded=all(t.effort is not None for t in trials),
                 clip=drive_clip(trials),
                 bounces=shuttle_bounces(trials),

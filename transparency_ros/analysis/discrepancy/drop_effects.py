@@ -4,7 +4,6 @@ where its physics acts (see :mod:`transparency_ros.analysis.discrepancy.drop`)."
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -17,17 +16,6 @@ from transparency_ros.analysis.discrepancy.effects import drifted, pinned
 from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
 
 LOCAL_GRAVITY_SPREAD = 0.005  # of the weight: what local gravity may differ from the tool's g
-# cogging periods per output revolution tried: from where the positions the arm visited span
-# one whole period (less of a wave is a constant torque and a spring there: 2 periods per
-# revolution took up a Stribeck hump on an independent rig, and on the zoo's fresh seeds
-# 9600-9699 four of five waves named where none was hidden had 8-14 periods, 0.5-0.8 of a
-# period over the arm's travel, in place of a hidden offset or rebound) and 2 at
-# least (1 is a weight's), up to where a period spans COGGING_COUNTS encoder counts (a finer
-# wave is not seen), at most
-MOST_COGGING_PERIODS = 400
-COGGING_COUNTS = 8
-COGGING_PROBE_NM = 0.01  # the wave's size the scan linearizes at
-COGGING_FINALISTS = 5  # periods of the linear scan simulated at their fitted sizes
 # an offset below this share of the Coulomb torque is where a friction law stops the arm
 FRICTION_BAND_SHARE = 0.1
 DELAY_RESOLUTION = 0.1  # of the interval between encoder readings: a shorter delay names nothing
@@ -151,10 +139,17 @@ class DropBacklash(DropEffect):
     named on fresh zoo seeds 9400-9499 were 1.9-8x the truth; in 7 of them the travel was
     within 11 % of the true width. Both variants are candidates; where
     they explain the recordings alike, the one with fewer parameters is named
-    (``Discoverer._choose``)."""
+    (``Discoverer._choose``).
 
-    def __init__(self, start: float | None = None) -> None:
+    A band narrower than ``least_rad`` (the RMS position error sensor noise alone gives: the
+    problem's noise floor) names nothing: the arm's free travel in it is not told from the
+    readings' noise. On the zoo's development campaigns 10000-10199 the bands named where
+    none was hidden were 0.4-0.9 of the floor wide (0.0002-0.0009 rad), and the hidden ones
+    were fitted 3.8-74 times as wide as it (0.0035-0.022 rad)."""
+
+    def __init__(self, start: float | None = None, least_rad: float = 0.0) -> None:
         self.start = start
+        self.least_rad = least_rad
         if start is None:
             super().__init__(
                 "backlash",
@@ -171,6 +166,9 @@ class DropBacklash(DropEffect):
         if self.start is None:
             return np.array([0.025, 0.0])
         return np.array([0.0125])
+
+    def meaningful(self, p: FloatArray) -> bool:
+        return super().meaningful(p) and float(p[0]) >= self.least_rad
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
         start = float(p[1]) if self.start is None else self.start
@@ -401,96 +399,6 @@ class DropOffset(DropEffect):
         return replace(ph, torque_offset_nm=float(p[0]) * np.asarray(ph.sense, dtype=float))
 
 
-class DropCogging(DropEffect):
-    """The motor's cogging: A sin(N theta + phase) in the rig's theta sense, at the motor's
-    true position. N (periods per output revolution) is a choice made from the data by
-    :meth:`scan`; A and the phase are fitted. Its null value is A = 0 (any phase)."""
-
-    def __init__(self) -> None:
-        super().__init__(
-            "cogging",
-            ("amplitude_nm", "phase_rad"),
-            (0.0, -2 * math.pi),
-            (1.0, 2 * math.pi),
-            discrete_choices=1,
-            null=(0.0, math.nan),
-        )
-        self.periods = 0
-
-    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return with_cogging(ph, float(p[0]), float(p[1]), self.periods)
-
-    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
-        return {"periods_per_rev": float(self.periods)}
-
-    def scan(
-        self, problem: DropProblem, effects: Sequence[DropEffect], params: Sequence[FloatArray]
-    ) -> FloatArray:
-        """Choose N, and start A and the phase, from the fitting trials: for every N the
-        error's response to a small sine wave and a small cosine wave (simulated, all N in one
-        run), and the two waves' sizes that remove most of the error (linear least squares);
-        the N whose waves, simulated, leave the least error is kept."""
-        count = problem.encoder_count
-        finest = MOST_COGGING_PERIODS
-        if count > 0:
-            finest = min(finest, int(2 * math.pi / (COGGING_COUNTS * count)))
-        coarsest = max(2, math.ceil(2 * math.pi / max(problem.position_span, 1e-9)))
-        periods = range(coarsest, max(finest, coarsest) + 1)
-        sets = [[*params, np.array([0.0, 0.0, coarsest])]]  # (no wave: the error as it is)
-        for n in periods:
-            sets += [
-                [*params, np.array([COGGING_PROBE_NM, 0.0, n])],
-                [*params, np.array([COGGING_PROBE_NM, math.pi / 2, n])],
-            ]
-        # every N's two waves in one simulation: each set carries its own N
-        probe = [*effects, _CoggingProbe()]
-        errors = problem.error_sets(probe, sets, False)
-        base = errors[0]
-        linear: dict[int, tuple[float, FloatArray]] = {}
-        for k, n in enumerate(periods):
-            basis = np.stack([errors[1 + 2 * k] - base, errors[2 + 2 * k] - base], axis=1)
-            (a, b), *_ = np.linalg.lstsq(basis, -base, rcond=None)
-            removed = float(base @ base - np.sum((base + basis @ np.array([a, b])) ** 2))
-            a, b = a * COGGING_PROBE_NM, b * COGGING_PROBE_NM
-            size = min(math.hypot(a, b), self.upper[0])
-            linear[n] = (removed, np.array([size, math.atan2(b, a)]))
-        # the linear prediction errs where the wave moves the arm by a good part of its period:
-        # the best few and their neighbours (N is seen to within a period or two over a short
-        # swing) simulated at their sizes, the best kept
-        ranked = sorted(linear, key=lambda n: -linear[n][0])[:COGGING_FINALISTS]
-        # (each also at the probe's size: a wave the linear fit makes too large)
-        tried = [
-            (m, np.array([size, linear[m][1][1]]))
-            for m in sorted({m for n in ranked for m in range(n - 2, n + 3) if m in linear})
-            for size in {linear[m][1][0], min(linear[m][1][0], COGGING_PROBE_NM)}
-        ]
-        costs = [
-            float(np.sum(e**2))
-            for e in problem.error_sets(probe, [[*params, np.r_[x, m]] for m, x in tried], False)
-        ]
-        self.periods, start = tried[int(np.argmin(costs))]
-        return start
-
-
-class _CoggingProbe(DropEffect):
-    """Cogging of any N for :meth:`DropCogging.scan`: parameters (A, phase, N)."""
-
-    def __init__(self) -> None:
-        super().__init__("cogging", ("amplitude_nm", "phase_rad", "periods_per_rev"), (), ())
-
-    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
-        return with_cogging(ph, float(p[0]), float(p[1]), float(p[2]))
-
-
-def with_cogging(ph: DropPhysics, amplitude: float, phase: float, periods: float) -> DropPhysics:
-    """``ph`` with A sin(N theta + phi) in the rig's sense: A sin(N q + sense phi) in the
-    model's (q = sense theta, and torques alike)."""
-    sense = np.asarray(ph.sense, dtype=float)
-    return replace(
-        ph, cogging_nm=amplitude, cogging_periods=periods, cogging_phase_rad=sense * phase
-    )
-
-
 class DeclaredWeight(DropEffect):
     """The shuttle's weight on the arm, m_s g r cos(theta), while they touch: its size is what
     the recording declares (shuttle mass and arm length in its custom_data, the tool's g), not
@@ -547,54 +455,3 @@ class MeasuredSaturation(DropEffect):
 
     def describe(self) -> str:
         return self.clip.describe()
-
-
-def drop_library(
-    shuttle_mass_kg: float,
-    coulomb_nm: float,
-    loaded_inertia_kgm2: float,
-    sample_interval_s: float,
-    *,
-    torques_recorded: bool = False,
-    clip: DriveClip | None = None,
-    bounces: Bounces | None = None,
-) -> list[DropEffect]:
-    """The candidates (``loaded_inertia_kgm2``: the arm's with the shuttle on it, J_a + m r^2,
-    for the frequency a torsional compliance is reported at; ``sample_interval_s``: between
-    the encoder's readings). A drive's limit is read off its recorded torque where it shows
-    one (``clip``); where every trial recorded the drive's torque and none shows a clip, no
-    limit is searched for (the torque would show it); where torques are missing, it is
-    fitted. A rebound is named where the load cell shows one (``bounces``), searched for where
-    it shows the shuttle leave the arm without striking it again within the recording, and not
-    searched for where it never leaves the arm (without ``bounces``: searched for)."""
-    rebound: list[DropEffect] = []
-    hub = HubArmCompliance(loaded_inertia_kgm2)
-    if bounces is not None and bounces.shown:
-        rebound = [ShownRestitution(bounces, rival=hub)]
-    elif bounces is None or bounces.possible:
-        rebound = [DropRestitution()]
-    if clip is not None:
-        saturation: list[DropEffect] = [MeasuredSaturation(clip)]
-    elif torques_recorded:
-        saturation = []
-    else:
-        # the drive clips its impedance torque (a current limit); the offset is added after it
-        saturation = [
-            SetPhysics("torque_saturation", "limit_nm", 0.02, 3.0, "torque_limit_nm", null=None)
-        ]
-    return [
-        DropDrift(),
-        DropOffset(coulomb_nm),
-        DeclaredWeight(),
-        DropStiction(),
-        *rebound,
-        ImpactSpeedLoss(shuttle_mass_kg),
-        StructuralCompliance(),
-        hub,
-        DropBacklash(),
-        DropBacklash(start=1.0),
-        SensorDelay(sample_interval_s),
-        DropQuantization(),
-        *saturation,
-        DropCogging(),
-    ]

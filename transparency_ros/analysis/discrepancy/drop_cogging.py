@@ -1,0 +1,121 @@
+"""The motor's cogging as a drop-test candidate (:class:`DropCogging`): its period is chosen from
+the data by a linearized scan over every period the recordings can show, its size and phase
+fitted (see :mod:`transparency_ros.analysis.discrepancy.drop_effects` for the others)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from transparency_ros.analysis.discrepancy.drop_effects import DropEffect
+from transparency_ros.analysis.discrepancy.drop_physics import DropPhysics
+from transparency_ros.analysis.discrepancy.model import FloatArray
+
+# cogging periods per output revolution tried: from where the positions the arm visited span
+# one whole period (less of a wave is a constant torque and a spring there: 2 periods per
+# revolution took up a Stribeck hump on an independent rig, and on the zoo's fresh seeds
+# 9600-9699 four of five waves named where none was hidden had 8-14 periods, 0.5-0.8 of a
+# period over the arm's travel, in place of a hidden offset or rebound) and 2 at
+# least (1 is a weight's), up to where a period spans COGGING_COUNTS encoder counts (a finer
+# wave is not seen), at most
+MOST_COGGING_PERIODS = 400
+COGGING_COUNTS = 8
+COGGING_PROBE_NM = 0.01  # the wave's size the scan linearizes at
+COGGING_FINALISTS = 5  # periods of the linear scan simulated at their fitted sizes
+
+if TYPE_CHECKING:
+    from transparency_ros.analysis.discrepancy.drop import DropProblem
+
+
+class DropCogging(DropEffect):
+    """The motor's cogging: A sin(N theta + phase) in the rig's theta sense, at the motor's
+    true position. N (periods per output revolution) is a choice made from the data by
+    :meth:`scan`; A and the phase are fitted. Its null value is A = 0 (any phase)."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            "cogging",
+            ("amplitude_nm", "phase_rad"),
+            (0.0, -2 * math.pi),
+            (1.0, 2 * math.pi),
+            discrete_choices=1,
+            null=(0.0, math.nan),
+        )
+        self.periods = 0
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return with_cogging(ph, float(p[0]), float(p[1]), self.periods)
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        return {"periods_per_rev": float(self.periods)}
+
+    def scan(
+        self, problem: DropProblem, effects: Sequence[DropEffect], params: Sequence[FloatArray]
+    ) -> FloatArray:
+        """Choose N, and start A and the phase, from the fitting trials: for every N the
+        error's response to a small sine wave and a small cosine wave (simulated, all N in one
+        run), and the two waves' sizes that remove most of the error (linear least squares);
+        the N whose waves, simulated, leave the least error is kept."""
+        count = problem.encoder_count
+        finest = MOST_COGGING_PERIODS
+        if count > 0:
+            finest = min(finest, int(2 * math.pi / (COGGING_COUNTS * count)))
+        coarsest = max(2, math.ceil(2 * math.pi / max(problem.position_span, 1e-9)))
+        periods = range(coarsest, max(finest, coarsest) + 1)
+        sets = [[*params, np.array([0.0, 0.0, coarsest])]]  # (no wave: the error as it is)
+        for n in periods:
+            sets += [
+                [*params, np.array([COGGING_PROBE_NM, 0.0, n])],
+                [*params, np.array([COGGING_PROBE_NM, math.pi / 2, n])],
+            ]
+        # every N's two waves in one simulation: each set carries its own N
+        probe = [*effects, _CoggingProbe()]
+        errors = problem.error_sets(probe, sets, False)
+        base = errors[0]
+        linear: dict[int, tuple[float, FloatArray]] = {}
+        for k, n in enumerate(periods):
+            basis = np.stack([errors[1 + 2 * k] - base, errors[2 + 2 * k] - base], axis=1)
+            (a, b), *_ = np.linalg.lstsq(basis, -base, rcond=None)
+            removed = float(base @ base - np.sum((base + basis @ np.array([a, b])) ** 2))
+            a, b = a * COGGING_PROBE_NM, b * COGGING_PROBE_NM
+            size = min(math.hypot(a, b), self.upper[0])
+            linear[n] = (removed, np.array([size, math.atan2(b, a)]))
+        # the linear prediction errs where the wave moves the arm by a good part of its period:
+        # the best few and their neighbours (N is seen to within a period or two over a short
+        # swing) simulated at their sizes, the best kept
+        ranked = sorted(linear, key=lambda n: -linear[n][0])[:COGGING_FINALISTS]
+        # (each also at the probe's size: a wave the linear fit makes too large)
+        tried = [
+            (m, np.array([size, linear[m][1][1]]))
+            for m in sorted({m for n in ranked for m in range(n - 2, n + 3) if m in linear})
+            for size in {linear[m][1][0], min(linear[m][1][0], COGGING_PROBE_NM)}
+        ]
+        costs = [
+            float(np.sum(e**2))
+            for e in problem.error_sets(probe, [[*params, np.r_[x, m]] for m, x in tried], False)
+        ]
+        self.periods, start = tried[int(np.argmin(costs))]
+        return start
+
+
+class _CoggingProbe(DropEffect):
+    """Cogging of any N for :meth:`DropCogging.scan`: parameters (A, phase, N)."""
+
+    def __init__(self) -> None:
+        super().__init__("cogging", ("amplitude_nm", "phase_rad", "periods_per_rev"), (), ())
+
+    def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
+        return with_cogging(ph, float(p[0]), float(p[1]), float(p[2]))
+
+
+def with_cogging(ph: DropPhysics, amplitude: float, phase: float, periods: float) -> DropPhysics:
+    """``ph`` with A sin(N theta + phi) in the rig's sense: A sin(N q + sense phi) in the
+    model's (q = sense theta, and torques alike)."""
+    sense = np.asarray(ph.sense, dtype=float)
+    return replace(
+        ph, cogging_nm=amplitude, cogging_periods=periods, cogging_phase_rad=sense * phase
+    )
