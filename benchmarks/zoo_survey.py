@@ -78,6 +78,7 @@ def analyse(campaign: Path) -> dict[str, Any]:
         load_drop_nominal,
         load_drop_trial,
     )
+    from transparency_ros.analysis.discrepancy.drop_force import ForceView  # noqa: PLC0415
     from transparency_ros.bag.reader import find_bags  # noqa: PLC0415
 
     started = time.perf_counter()
@@ -93,7 +94,7 @@ def analyse(campaign: Path) -> dict[str, Any]:
                 },
                 # named by the loop's last stage, on the load cell (drop_force); a rebound
                 # read off the load cell's bounces is not
-                "on_load_cell": f.evidence.startswith("held-out load cell"),
+                "on_load_cell": f.channel == ForceView.channel,
             }
             for f in report.findings
         }

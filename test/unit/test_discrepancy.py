@@ -180,7 +180,11 @@ def test_import_csv_then_discrepancy_json_and_report(tmp_path: Path) -> None:
         "confidence_interval",
         "heldout_rmse_before",
         "heldout_rmse_after",
+        "channel",
     }
+    assert finding["channel"] == "simulation"
+    assert finding["where"]["unit"] == "rad"
+    assert finding["where"]["phase"] in finding["where"]["rmse_reduction_by_phase"]
     low, high = finding["confidence_interval"]["offset_nm"]
     assert low <= finding["parameters"]["offset_nm"] <= high
     assert result["final_heldout_rmse"] < result["heldout_rmse_nominal"]

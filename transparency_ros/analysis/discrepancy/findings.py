@@ -30,6 +30,9 @@ class Finding:
     heldout_rmse_before: float
     heldout_rmse_after: float
     alternatives: list[str] = field(default_factory=list)  # explain the data as well
+    # the recording's channel it was judged on: "simulation" (the simulated positions) or a
+    # problem's second one (a drop test's "load cell in the ride", drop_force)
+    channel: str = "simulation"
 
 
 @dataclass
@@ -69,8 +72,9 @@ def parameters_text(finding: Finding) -> str:
 
 
 def locate(problem: Problem, before: FloatArray, after: FloatArray) -> dict[str, Any]:
-    """Where an effect acted: the motion phase whose held-out error it reduced most, and the
-    trial and time window of the largest reduction."""
+    """Where an effect acted: the motion phase whose held-out error it reduced most (the
+    reduction in every phase, in the problem's ``unit``), and the trial and time window of the
+    largest reduction."""
     gains = {}
     for name, mask in problem.phases().items():
         if mask.any():
@@ -86,7 +90,8 @@ def locate(problem: Problem, before: FloatArray, after: FloatArray) -> dict[str,
     trial, t0, t1 = labels[int(np.argmax(per_segment))]
     return {
         "phase": phase,
-        "rmse_reduction_by_phase_rad": gains,
+        "rmse_reduction_by_phase": gains,
+        "unit": getattr(problem, "unit", "rad"),
         "trial": trial,
         "window_s": [round(t0, 4), round(t1, 4)],
     }
@@ -106,7 +111,7 @@ def finding(
     else:
         ci = interval(step.result, x)
     together = [a.name for a in step.added if a is not cand]
-    channel = "held-out " + getattr(problem, "channel", "simulation") + " RMSE"
+    judged_on = getattr(problem, "channel", "simulation")
     unit = getattr(problem, "unit", "rad")
     read_off = hasattr(cand, "describe")
     judged_before, judged_after, judged_floor = step.judged
@@ -123,7 +128,7 @@ def finding(
         confidence_interval={n: c for n, c in zip(cand.param_names, ci, strict=True)},
         where=locate(problem, base.err, step.err),
         evidence=(
-            f"{channel} {before:.4g} -> {after:.4g} {unit} "
+            f"held-out {judged_on} RMSE {before:.4g} -> {after:.4g} {unit} "
             f"({100 * (1 - after / before):.0f} % lower) with {x.size} parameter(s)"
             + (f"; read off the recording: {cand.describe()}" if read_off else "")
             + judged
@@ -137,6 +142,7 @@ def finding(
         heldout_rmse_before=before,
         heldout_rmse_after=after,
         alternatives=list(step.alternatives),
+        channel=judged_on,
     )
 
 
