@@ -100,13 +100,17 @@ def test_a_shown_rebound_is_in_the_problems_candidates(tmp_path: Path) -> None:
 
 
 def _declared_after(
-    rebound_fit: tuple[float, float], spring_fit: tuple[float, float], ratio: float
+    rebound_fit: tuple[float, float],
+    spring_fit: tuple[float, float],
+    ratio: float,
+    refused: dict[int, tuple[np.ndarray, bool]] | None = None,
 ) -> list[tuple[str, list[str]]]:
     """What the declared stage names from a shown rebound fitted ``rebound_fit`` (e, log10 of
     the contact's stiffness) whose rival, the hub spring, fitted ``spring_fit`` (log10 of its
     stiffness, damping ratio) with ``ratio`` times its held-out RMSE; the rebound fitted on
     top of the spring has its coefficient's interval away from 0. The fits are given: what
-    is tested is the rule that picks between them and what the loop does with its pick."""
+    is tested is the rule that picks between them and what the loop does with its pick
+    (``refused``: filled with the loop's record of the shown fits it refused)."""
     spring = HubArmCompliance(loaded_inertia_kgm2=0.01)
     shown = ShownRestitution(Bounces(struck_again=8, left=8, of=8, pause_s=0.008), rival=spring)
     fitted = {id(shown): np.array(rebound_fit), id(spring): np.array(spring_fit)}
@@ -130,6 +134,7 @@ def _declared_after(
     loop = Discoverer.__new__(Discoverer)
     loop.problem = SimpleNamespace(candidates=lambda: [shown])
     loop.progress = lambda _t: None
+    loop._refused = {} if refused is None else refused
     loop._single = single  # type: ignore[method-assign]
     loop._finding = lambda cand, step, *_a: SimpleNamespace(  # type: ignore[method-assign]
         effect=cand.name, alternatives=step.alternatives, evidence=""
@@ -161,10 +166,15 @@ def test_a_shown_bounce_fitted_as_a_stiff_contacts_chatter_names_no_rebound() ->
     """A light arm springs back and throws the shuttle off a stiff contact for a few ms: the
     load cell shows it strike again, and the rebound fitted to it is small. Below e 0.17 it
     is not named, whatever it gains; from there on it is, as before."""
-    assert _declared_after((0.10, 6.4), (3.3, 0.2), 1.0) == []
+    refused: dict[int, tuple[np.ndarray, bool]] = {}
+    assert _declared_after((0.10, 6.4), (3.3, 0.2), 1.0, refused) == []
+    # (the loop keeps the refused fit for the report's note on the bounce)
+    assert [(float(p[0]), null) for p, null in refused.values()] == [(0.10, False)]
     assert _declared_after((0.16, 6.4), (3.3, 0.2), 1.0) == []
     assert [name for name, _ in _declared_after((0.25, 6.4), (3.3, 0.2), 1.0)] == ["restitution"]
     # in the standard rule too (a pair with a searched effect): the same size is refused
     shown = ShownRestitution(Bounces(struck_again=8, left=8, of=8, pause_s=0.008))
     assert not shown.shows(np.array([0.1, 6.4])) and shown.shows(np.array([0.3, 6.4]))
-    assert "from e 0.17 up" in shown.unnamed
+    # the report's note says why no rebound was named
+    assert "e 0.10, under 0.17" in shown.unnamed(np.array([0.1, 6.4]), False)
+    assert "holds e = 0" in shown.unnamed(np.array([0.3, 6.4]), True)

@@ -81,6 +81,9 @@ class Discoverer:
             problem.min_improvement if min_improvement is None else min_improvement
         )
         self.progress = progress
+        # the last refused fit of each declared effect (by id) and whether its interval held
+        # its null: what the report's note on a shown effect not named says
+        self._refused: dict[int, tuple[FloatArray, bool]] = {}
 
     def run(self) -> Report:
         started = time.perf_counter()
@@ -107,9 +110,9 @@ class Discoverer:
         )
         effects, params, held_err = self._on_load_cell(report, effects, params, held_err)
         report.notes += [
-            f"not named: {c.describe()}; {c.unnamed}"
+            f"not named: {c.describe()}; {c.unnamed(*self._refused[id(c)])}"
             for c in self._pending_declared(effects)
-            if getattr(c, "shown", False) and hasattr(c, "unnamed")
+            if getattr(c, "shown", False) and hasattr(c, "unnamed") and id(c) in self._refused
         ]
         report.fitted = list(zip(effects, params, strict=True))
         widen(report, getattr(problem, "model_error_share", 0.0))
@@ -299,6 +302,8 @@ class Discoverer:
                 step, cand = rival, rival.added[0]
             elif not accept(step, base):
                 waiting.append(cand)
+                if getattr(cand, "shown", False):
+                    self._refused[id(cand)] = (step.new()[-1][1], self._null_inside(step))
                 continue
             # those refused so far are tried again with it (it may have hidden them)
             queue, waiting = [*waiting, *queue], []

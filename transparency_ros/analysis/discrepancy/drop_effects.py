@@ -288,7 +288,6 @@ class ShownRestitution(DropRestitution):
     SOFT_CONTACT = 5.8  # log10 N/m: the rebound's contact softer than this
     RINGS = 0.1  # the spring's damping ratio below this
     SHOWS = 0.17  # the least coefficient named as a rebound
-    unnamed = f"no rebound named (one is, from e {SHOWS} up: less is a stiff contact's chatter)"
 
     def __init__(self, bounces: Bounces, rival: DropEffect | None = None) -> None:
         super().__init__()
@@ -304,6 +303,17 @@ class ShownRestitution(DropRestitution):
 
     def meaningful(self, p: FloatArray) -> bool:  # (and of a size the load cell shows)
         return self.shows(p) and super().meaningful(p)
+
+    def unnamed(self, p: FloatArray, null_inside: bool) -> str:
+        """Why no rebound was named, its last fit ``p`` refused (``null_inside``: its 95 %
+        interval held e = 0)."""
+        if not self.shows(p):
+            why = f"under {self.SHOWS}, where a stiff contact's chatter is"
+        elif null_inside:
+            why = "not told from none: its 95 % interval holds e = 0"
+        else:
+            why = "at a bound of its range, or no better for the held-out trials"
+        return f"no rebound named: fitted e {float(p[0]):.2f}, {why}"
 
     def yields(self, own: FloatArray, rival: FloatArray, ratio: float) -> bool:
         """Whether the spring (fitted ``rival``) stands for the bounce rather than this
