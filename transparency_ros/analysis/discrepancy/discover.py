@@ -81,8 +81,8 @@ class Discoverer:
             problem.min_improvement if min_improvement is None else min_improvement
         )
         self.progress = progress
-        # the last refused fit of each declared effect (by id) and whether its interval held
-        # its null: what the report's note on a shown effect not named says
+        # the last refused fit of each shown effect (by id) and whether its interval held its
+        # null: what the report's note on a shown effect not named says
         self._refused: dict[int, tuple[FloatArray, bool]] = {}
 
     def run(self) -> Report:
