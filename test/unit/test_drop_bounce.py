@@ -134,13 +134,15 @@ def _declared_after(
     loop = Discoverer.__new__(Discoverer)
     loop.problem = SimpleNamespace(candidates=lambda: [shown])
     loop.progress = lambda _t: None
-    loop._refused = {} if refused is None else refused
+    loop._refused = {}
     loop._single = single  # type: ignore[method-assign]
     loop._finding = lambda cand, step, *_a: SimpleNamespace(  # type: ignore[method-assign]
         effect=cand.name, alternatives=step.alternatives, evidence=""
     )
     report = SimpleNamespace(findings=[])
     loop._declared(report, [], [], np.full(1000, 2e-3), 1e-4)  # type: ignore[arg-type]
+    if refused is not None:  # each refused step's fit, and whether its interval held the null
+        refused |= {k: (s.new()[-1][1], loop._null_inside(s)) for k, s in loop._refused.items()}
     return [(f.effect, f.alternatives) for f in report.findings]
 
 

@@ -81,9 +81,9 @@ class Discoverer:
             problem.min_improvement if min_improvement is None else min_improvement
         )
         self.progress = progress
-        # the last refused fit of each shown effect (by id) and whether its interval held its
-        # null: what the report's note on a shown effect not named says
-        self._refused: dict[int, tuple[FloatArray, bool]] = {}
+        # the last refused step of each shown effect (by id): what the report's note on a
+        # shown effect not named says
+        self._refused: dict[int, Step] = {}
 
     def run(self) -> Report:
         started = time.perf_counter()
@@ -110,7 +110,7 @@ class Discoverer:
         )
         effects, params, held_err = self._on_load_cell(report, effects, params, held_err)
         report.notes += [
-            f"not named: {c.describe()}; {c.unnamed(*self._refused[id(c)])}"
+            f"not named: {c.describe()}; {self._unnamed(c)}"
             for c in self._pending_declared(effects)
             if getattr(c, "shown", False) and hasattr(c, "unnamed") and id(c) in self._refused
         ]
@@ -303,7 +303,7 @@ class Discoverer:
             elif not accept(step, base):
                 waiting.append(cand)
                 if getattr(cand, "shown", False):
-                    self._refused[id(cand)] = (step.new()[-1][1], self._null_inside(step))
+                    self._refused[id(cand)] = step
                 continue
             # those refused so far are tried again with it (it may have hidden them)
             queue, waiting = [*waiting, *queue], []
@@ -311,6 +311,12 @@ class Discoverer:
             self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
             effects, params, held_err = [*effects, cand], step.params, step.err
         return effects, params, held_err
+
+    def _unnamed(self, cand: Any) -> str:
+        """Why shown ``cand`` was not named: its last refused fit, and whether that fit's
+        interval held its null (worked out here, once, for the effects left unnamed)."""
+        step = self._refused[id(cand)]
+        return str(cand.unnamed(step.new()[-1][1], self._null_inside(step)))
 
     def _rival_instead(
         self, effects: list[Any], params: list[FloatArray], cand: Any, step: Step, base: Base

@@ -71,9 +71,11 @@ def parameters_text(finding: Finding) -> str:
     return ", ".join(parts)
 
 
-def locate(problem: Problem, before: FloatArray, after: FloatArray) -> dict[str, Any]:
+def locate(
+    problem: Problem, before: FloatArray, after: FloatArray, unit: str = "rad"
+) -> dict[str, Any]:
     """Where an effect acted: the motion phase whose held-out error it reduced most (the
-    reduction in every phase, in the problem's ``unit``), and the trial and time window of the
+    reduction in every phase, in ``unit``: the problem's), and the trial and time window of the
     largest reduction."""
     gains = {}
     for name, mask in problem.phases().items():
@@ -91,7 +93,7 @@ def locate(problem: Problem, before: FloatArray, after: FloatArray) -> dict[str,
     return {
         "phase": phase,
         "rmse_reduction_by_phase": gains,
-        "unit": getattr(problem, "unit", "rad"),
+        "unit": unit,
         "trial": trial,
         "window_s": [round(t0, 4), round(t1, 4)],
     }
@@ -126,7 +128,7 @@ def finding(
         parameters={n: float(v) for n, v in zip(cand.param_names, x, strict=True)}
         | cand.extra_parameters(x),
         confidence_interval={n: c for n, c in zip(cand.param_names, ci, strict=True)},
-        where=locate(problem, base.err, step.err),
+        where=locate(problem, base.err, step.err, unit),
         evidence=(
             f"held-out {judged_on} RMSE {before:.4g} -> {after:.4g} {unit} "
             f"({100 * (1 - after / before):.0f} % lower) with {x.size} parameter(s)"
