@@ -144,7 +144,9 @@ class Discoverer:
         closest: Step | None = None
         left = getattr(problem, "structure_left", lambda e: rmse(e) > SIGNIFICANT * floor)
         while remaining and left(held_err):
-            base = Base(held_err, rmse(held_err), aic(held_err, total(params)), floor)
+            base = Base(
+                held_err, rmse(held_err), aic(held_err, total(params)), floor, effects, params
+            )
             singles = [self._single(effects, params, cand, base) for cand in remaining]
             step = self._choose([s for s in singles if self._names(s, base)])
             if step is None and declared:
@@ -225,11 +227,13 @@ class Discoverer:
         """Each declared effect not yet in the model, added where it improves the held-out
         fit (lower RMSE, information criterion better by 10) or where the recording shows it
         acting (``shown``: a drive's recorded torque held at its limit, a shuttle striking the
-        arm again). What is fitted of it must be told from nothing (its 95 % interval without
-        its null value): a load cell showed a shuttle chatter on a rig whose contact is nearly
-        inelastic, and the rebound fitted there was 0.007 (-0.09 to 0.10). A shown effect
-        is meaningful only at a size it shows (a rebound: a coefficient that is more than
-        the chatter of a stiff contact)."""
+        arm again), or where a second channel shows it (``shows_elsewhere`` of the problem: a
+        drop test's load cell reads the shuttle's weight while it rides the arm, which a
+        missing sensor delay may hide from the encoder). What is fitted of it must be told
+        from nothing (its 95 % interval without its null value): a load cell showed a
+        shuttle chatter on a rig whose contact is nearly inelastic, and the rebound fitted
+        there was 0.007 (-0.09 to 0.10). A shown effect is meaningful only at a size it shows
+        (a rebound: a coefficient that is more than the chatter of a stiff contact)."""
         return self._each_added(
             report,
             (effects, params, held_err),
@@ -242,6 +246,7 @@ class Discoverer:
                     step.shown
                     or all(getattr(a, "shown", False) for a in step.added)
                     or (step.rmse < base.rmse and step.aic < base.aic - 10)
+                    or getattr(self.problem, "shows_elsewhere", lambda _s, _b: False)(step, base)
                 )
             ),
         )
@@ -294,7 +299,9 @@ class Discoverer:
         queue, waiting = list(candidates), []
         while queue:
             cand = queue.pop(0)
-            base = Base(held_err, rmse(held_err), aic(held_err, total(params)), floor)
+            base = Base(
+                held_err, rmse(held_err), aic(held_err, total(params)), floor, effects, params
+            )
             step = self._single(effects, params, cand, base, after_search=after_search)
             rival = self._rival_instead(effects, params, cand, step, base)
             if rival is not None and accept(rival, base):

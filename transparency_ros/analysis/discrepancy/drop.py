@@ -66,6 +66,7 @@ from transparency_ros.analysis.discrepancy.problem import (
     position_noise,
     spectrum_peak,
 )
+from transparency_ros.analysis.discrepancy.steps import Base, Step
 from transparency_ros.core.errors import ConfigError
 
 __all__ = ["PHASES", "DropProblem", "DropTrial", "load_drop_nominal", "load_drop_trial"]
@@ -313,6 +314,19 @@ class DropProblem:
 
     def force_view(self) -> ForceView | None:
         """The trials seen through the load cell while the shuttle rides (drop_force)."""
+        return force_view(self)
+
+    def shows_elsewhere(self, step: Step, base: Base) -> bool:
+        """Whether the load cell in the ride shows what ``step`` adds to the model ``base`` is
+        the error of (ForceView.shows; False without a usable load cell); what it shows goes
+        into the step's evidence (``elsewhere``)."""
+        view = self._load_cell
+        if view is not None:
+            step.elsewhere = view.shows(base.effects, base.params, step.added, step.params)
+        return bool(step.elsewhere)
+
+    @cached_property
+    def _load_cell(self) -> ForceView | None:
         return force_view(self)
 
     def noise_floor(self) -> float:

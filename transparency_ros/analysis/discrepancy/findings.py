@@ -131,9 +131,11 @@ def finding(
         where=locate(problem, base.err, step.err, unit),
         evidence=(
             f"held-out {judged_on} RMSE {before:.4g} -> {after:.4g} {unit} "
-            f"({100 * (1 - after / before):.0f} % lower) with {x.size} parameter(s)"
+            f"({abs(100 * (1 - after / before)):.0f} % {'lower' if after <= before else 'higher'})"
+            f" with {x.size} parameter(s)"
             + (f"; read off the recording: {cand.describe()}" if read_off else "")
             + judged
+            + (f"; {step.elsewhere}" if getattr(step, "elsewhere", "") else "")
             + (
                 f"; found together with {', '.join(together)} (neither explains it alone)"
                 if together

@@ -19,6 +19,9 @@ class Base:
     rmse: float
     aic: float
     floor: float  # the noise floor
+    # the model it is the error of (the effects found so far, their parameters)
+    effects: list[Any] = field(default_factory=list)
+    params: list[FloatArray] = field(default_factory=list)
 
 
 @dataclass
@@ -39,6 +42,7 @@ class Step:
     alone_aic: list[float] = field(default_factory=list)  # a pair: each member alone
     alternatives: list[str] = field(default_factory=list)
     shown: bool = False  # stands for a declared effect the recording shows (see _each_added)
+    elsewhere: str = ""  # what a second channel showed of it (a problem's shows_elsewhere)
 
     def new(self) -> list[tuple[Any, FloatArray]]:
         return list(zip(self.added, self.params[len(self.params) - len(self.added) :], strict=True))
