@@ -16,7 +16,7 @@ from transparency_ros.analysis.discrepancy.effects import ParameterDrift, librar
 from transparency_ros.analysis.discrepancy.findings import Finding, Report, parameters_text, widen
 from transparency_ros.analysis.discrepancy.fitting import held_at
 from transparency_ros.analysis.discrepancy.model import Trial, load_nominal
-from transparency_ros.analysis.discrepancy.steps import Step
+from transparency_ros.analysis.discrepancy.steps import Step, null_inside
 from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.synth.campaign import OUTSIDE, write_campaign
@@ -224,7 +224,6 @@ def test_a_rebound_yields_to_a_spring_that_explains_alike_and_not_to_a_worse_one
     """Between a contact's rebound and a hub-arm spring of as many parameters that explain the
     held-out data within 5 %, the spring is named though the rebound fits a little better; a
     rebound that fits clearly better (10 %) is named."""
-    from transparency_ros.analysis.discrepancy.discover import Discoverer  # noqa: PLC0415
     from transparency_ros.analysis.discrepancy.steps import Step  # noqa: PLC0415
 
     rebound, spring = DropRestitution(), HubArmCompliance(loaded_inertia_kgm2=0.01)
@@ -313,7 +312,7 @@ def test_a_parameter_held_at_its_null_bound_is_not_told_from_nothing() -> None:
 
     at_null = step(1e-6)
     assert held_at(at_null.result, at_null.result.x)(0, 0.0)
-    assert Discoverer._null_inside(at_null)
+    assert null_inside(at_null)
     inside = step(0.3)
     assert not held_at(inside.result, inside.result.x)(0, 0.0)
-    assert not Discoverer._null_inside(inside)
+    assert not null_inside(inside)

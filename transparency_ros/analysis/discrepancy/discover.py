@@ -30,7 +30,6 @@ forced onto a label.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -49,7 +48,6 @@ from transparency_ros.analysis.discrepancy.findings import (
 from transparency_ros.analysis.discrepancy.fitting import (
     aic,
     fit_candidate,
-    held_at,
     interval,
     parameter_count,
     refit,
@@ -57,7 +55,15 @@ from transparency_ros.analysis.discrepancy.fitting import (
 )
 from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel, Trial
 from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
-from transparency_ros.analysis.discrepancy.steps import Base, Step, not_named, same, total
+from transparency_ros.analysis.discrepancy.revisit import rivals_again, still_needed
+from transparency_ros.analysis.discrepancy.steps import (
+    Base,
+    Step,
+    not_named,
+    null_inside,
+    same,
+    total,
+)
 from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem
 from transparency_ros.core.errors import ModelError
 
@@ -84,6 +90,7 @@ class Discoverer:
         # the last refused step of each shown effect (by id): what the report's note on a
         # shown effect not named says
         self._refused: dict[int, Step] = {}
+        self._paired: set[int] = set()  # effects named together (by id): never tried alone
 
     def run(self) -> Report:
         started = time.perf_counter()
@@ -101,10 +108,14 @@ class Discoverer:
         # One that does not improve it yet is tried again after each effect found (a large
         # missing effect may hide it)
         effects, params, held_err = self._declared(report, effects, params, held_err, floor)
+        searched = len(effects)
         remaining = not_named(remaining, effects)
         effects, params, held_err, remaining, closest = self._search(
             report, effects, params, held_err, remaining
         )
+        effects, params = rivals_again(self, report, effects, params, floor)
+        effects, params = still_needed(self, report, effects, params, floor, searched=searched)
+        held_err = problem.error(effects, params, True)
         effects, params, held_err = self._checked_last(
             report, effects, params, held_err, remaining=remaining, floor=floor
         )
@@ -176,6 +187,8 @@ class Discoverer:
                 first_rmse = after
                 self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
             effects = [*effects, *step.added]
+            if len(step.added) > 1:
+                self._paired |= {id(a) for a in step.added}
             params, held_err = step.params, step.err
             if step.joint:  # every parameter refitted: the findings' values and intervals
                 intervals = interval(step.result, step.result.x)
@@ -239,16 +252,20 @@ class Discoverer:
             (effects, params, held_err),
             self._pending_declared(effects),
             floor,
-            lambda step, base: (
-                step.meaningful
-                and not self._null_inside(step)
-                and (
-                    step.shown
-                    or all(getattr(a, "shown", False) for a in step.added)
-                    or (step.rmse < base.rmse and step.aic < base.aic - 10)
-                    or getattr(self.problem, "shows_elsewhere", lambda _s, _b: False)(step, base)
-                )
-            ),
+            self._takes_declared,
+        )
+
+    def _takes_declared(self, step: Step, base: Base) -> bool:
+        """Whether a declared effect is named (_declared)."""
+        return (
+            step.meaningful
+            and not null_inside(step)
+            and (
+                step.shown
+                or all(getattr(a, "shown", False) for a in step.added)
+                or (step.rmse < base.rmse and step.aic < base.aic - 10)
+                or getattr(self.problem, "shows_elsewhere", lambda _s, _b: False)(step, base)
+            )
         )
 
     def _checked_last(
@@ -323,7 +340,7 @@ class Discoverer:
         """Why shown ``cand`` was not named: its last refused fit, and whether that fit's
         interval held its null (worked out here, once, for the effects left unnamed)."""
         step = self._refused[id(cand)]
-        return str(cand.unnamed(step.new()[-1][1], self._null_inside(step)))
+        return str(cand.unnamed(step.new()[-1][1], null_inside(step)))
 
     def _rival_instead(
         self, effects: list[Any], params: list[FloatArray], cand: Any, step: Step, base: Base
@@ -464,42 +481,12 @@ class Discoverer:
         is left; one that stands in for something else explains part of it."""
         return (
             step.meaningful
-            and not self._null_inside(step)
+            and not null_inside(step)
             and step.judged[0] - step.judged[1] >= 0.1 * step.judged[2]
             and step.gain >= self.min_improvement
             and step.aic < base.aic - 10
             and all(step.aic < a - 10 for a in step.alone_aic)
         )
-
-    @staticmethod
-    def _null_inside(step: Step) -> bool:
-        """Whether the 95 % interval of an added effect holds its value of no effect
-        (``null``: no backlash, no delay; NaN: any value, cogging's phase) for every
-        parameter: the data do not tell it from nothing, however much the fitted value
-        removes. A parameter the fit holds at a bound of its range that is its null holds it
-        too (its interval is the bound itself): the fit would go past no effect if it could.
-        On the independent rig, rebounds fitted at e 0.000 (0.000 to 0.000) were named so.
-        The fitted parameters of the added effects are the last of the fit's."""
-        if step.result is None or getattr(step.result, "jac", None) is None:
-            return False
-        ci = interval(step.result, step.result.x)
-        at_null = held_at(step.result, step.result.x)
-        end = len(ci)
-        for effect, x in reversed(step.new()):
-            if not getattr(effect, "fittable", True):
-                continue
-            own, end = ci[end - x.size : end], end - x.size
-            null = getattr(effect, "null", None)
-            if (
-                null is not None
-                and own
-                and all(
-                    math.isnan(z) or lo <= z <= hi or at_null(end + i, z)
-                    for i, ((lo, hi), z) in enumerate(zip(own, null, strict=True))
-                )
-            ):
-                return True
-        return False
 
     def _choose(self, steps: list[Step]) -> Step | None:
         """The best step by the information criterion. Steps that explain the held-out data

@@ -4,10 +4,12 @@ and which candidates are variants of one effect (:func:`same`)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from transparency_ros.analysis.discrepancy.fitting import held_at, interval
 from transparency_ros.analysis.discrepancy.model import FloatArray
 
 
@@ -46,6 +48,36 @@ class Step:
 
     def new(self) -> list[tuple[Any, FloatArray]]:
         return list(zip(self.added, self.params[len(self.params) - len(self.added) :], strict=True))
+
+
+def null_inside(step: Step) -> bool:
+    """Whether the 95 % interval of an added effect holds its value of no effect
+    (``null``: no backlash, no delay; NaN: any value, cogging's phase) for every
+    parameter: the data do not tell it from nothing, however much the fitted value
+    removes. A parameter the fit holds at a bound of its range that is its null holds it
+    too (its interval is the bound itself): the fit would go past no effect if it could.
+    On the independent rig, rebounds fitted at e 0.000 (0.000 to 0.000) were named so.
+    The fitted parameters of the added effects are the last of the fit's."""
+    if step.result is None or getattr(step.result, "jac", None) is None:
+        return False
+    ci = interval(step.result, step.result.x)
+    at_null = held_at(step.result, step.result.x)
+    end = len(ci)
+    for effect, x in reversed(step.new()):
+        if not getattr(effect, "fittable", True):
+            continue
+        own, end = ci[end - x.size : end], end - x.size
+        null = getattr(effect, "null", None)
+        if (
+            null is not None
+            and own
+            and all(
+                math.isnan(z) or lo <= z <= hi or at_null(end + i, z)
+                for i, ((lo, hi), z) in enumerate(zip(own, null, strict=True))
+            )
+        ):
+            return True
+    return False
 
 
 def not_named(remaining: list[Any], effects: list[Any]) -> list[Any]:
