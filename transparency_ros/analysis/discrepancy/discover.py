@@ -23,7 +23,9 @@ after each finding. A 95 % interval holding an effect's null value (``null``) na
 intervals are widened by the problem's ``model_error_share`` of the value at the end. A
 problem with a second channel (``force_view``: a drop test's load cell while the shuttle rides
 the arm) has the candidates not named searched once more there, the effects found held. What
-is left is checked for structure (phase RMS against the noise floor, its dominant frequency, how
+is left after the search (two decisions taken again on the final model first, ``revisit``: a
+shown effect against its rival, and each searched effect tried again without it) is checked
+for structure (phase RMS against the noise floor, its dominant frequency, how
 much of it the state explains, the closest candidate) and reported as ``unexplained``, never
 forced onto a label.
 """

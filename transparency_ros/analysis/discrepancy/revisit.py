@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from transparency_ros.analysis.discrepancy.findings import Report
-from transparency_ros.analysis.discrepancy.fitting import aic, refit, rmse
+from transparency_ros.analysis.discrepancy.findings import Report, update_findings
+from transparency_ros.analysis.discrepancy.fitting import aic, interval, refit, rmse
 from transparency_ros.analysis.discrepancy.model import FloatArray
 from transparency_ros.analysis.discrepancy.steps import Base, total
 
@@ -74,8 +74,9 @@ def still_needed(
     """Each effect the search named (from index ``searched`` on, in the order found; not
     those declared or shown, nor those named as a pair), taken out of the final model, the
     others refitted without it, and tried again by the rule that named it (``_names``). One
-    that no longer names is dropped with its finding: what it explained when it was named,
-    an effect found after it explains now."""
+    that no longer names is dropped with its finding, and a note says so: what it explained
+    when it was named, an effect found after it explains now. The others keep the values
+    refitted without it."""
     i = searched
     while i < len(effects):
         cand = effects[i]
@@ -87,7 +88,7 @@ def still_needed(
             i += 1
             continue
         others, rest = effects[:i] + effects[i + 1 :], params[:i] + params[i + 1 :]
-        rest, _ = refit(loop.problem, others, rest)
+        rest, result = refit(loop.problem, others, rest)
         err = loop.problem.error(others, rest, True)
         base = Base(err, rmse(err), aic(err, total(rest)), floor, others, rest)
         step = loop._single(others, rest, cand, base)
@@ -101,4 +102,6 @@ def still_needed(
         )
         report.findings[i : i + 1] = []
         effects, params = others, rest
+        if result is not None:  # the others' values and intervals, refitted without it
+            update_findings(report, effects, params, interval(result, result.x))
     return effects, params
