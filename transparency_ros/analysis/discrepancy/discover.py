@@ -92,7 +92,8 @@ class Discoverer:
         # the last refused step of each shown effect (by id): what the report's note on a
         # shown effect not named says
         self._refused: dict[int, Step] = {}
-        self._paired: set[int] = set()  # effects named together (by id): never tried alone
+        # the effects the search named alone (by id): revisit.still_needed tries them again
+        self._searched: set[int] = set()
 
     def run(self) -> Report:
         started = time.perf_counter()
@@ -110,13 +111,12 @@ class Discoverer:
         # One that does not improve it yet is tried again after each effect found (a large
         # missing effect may hide it)
         effects, params, held_err = self._declared(report, effects, params, held_err, floor)
-        searched = len(effects)
         remaining = not_named(remaining, effects)
         effects, params, held_err, remaining, closest = self._search(
             report, effects, params, held_err, remaining
         )
         effects, params = rivals_again(self, report, effects, params, floor)
-        effects, params = still_needed(self, report, effects, params, floor, searched=searched)
+        effects, params = still_needed(self, report, effects, params, floor)
         held_err = problem.error(effects, params, True)
         effects, params, held_err = self._checked_last(
             report, effects, params, held_err, remaining=remaining, floor=floor
@@ -189,8 +189,8 @@ class Discoverer:
                 first_rmse = after
                 self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
             effects = [*effects, *step.added]
-            if len(step.added) > 1:
-                self._paired |= {id(a) for a in step.added}
+            if len(step.added) == 1 and not step.shown:
+                self._searched.add(id(step.added[0]))
             params, held_err = step.params, step.err
             if step.joint:  # every parameter refitted: the findings' values and intervals
                 intervals = interval(step.result, step.result.x)
