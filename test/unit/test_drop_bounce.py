@@ -100,6 +100,21 @@ def test_a_shown_rebound_is_in_the_problems_candidates(tmp_path: Path) -> None:
     ]
 
 
+def _given(cand: DropEffect, params: list[np.ndarray], own: np.ndarray, rmse: float) -> Step:
+    """A step of ``cand`` with its fit given (``own``), removing 90 % of the error to ``rmse``."""
+    return Step(
+        added=[cand],
+        params=[*params, own],
+        err=np.full(1000, rmse),
+        rmse=rmse,
+        aic=1000 * np.log(rmse**2),
+        gain=0.9,
+        judged=(2e-3, rmse, 1e-4),
+        result=None,
+        meaningful=cand.meaningful(own),  # as Discoverer._step has it
+    )
+
+
 def _declared_after(
     rebound_fit: tuple[float, float],
     spring_fit: tuple[float, float],
@@ -120,17 +135,7 @@ def _declared_after(
         effects: list[object], params: list[np.ndarray], cand: object, base: Base, **_: object
     ) -> Step:
         rmse = 1e-3 * (ratio if cand is spring else 1.0) * (0.9 if effects else 1.0)
-        return Step(
-            added=[cand],
-            params=[*params, fitted[id(cand)]],
-            err=np.full(1000, rmse),
-            rmse=rmse,
-            aic=1000 * np.log(rmse**2),
-            gain=0.9,
-            judged=(2e-3, rmse, 1e-4),
-            result=None,
-            meaningful=cand.meaningful(fitted[id(cand)]),  # as Discoverer._step has it
-        )
+        return _given(cand, params, fitted[id(cand)], rmse)
 
     loop = Discoverer.__new__(Discoverer)
     loop.problem = SimpleNamespace(candidates=lambda: [shown])
@@ -212,17 +217,7 @@ def test_a_rivalry_is_decided_again_on_the_model_the_search_ended_with(
         rmse = 1e-3 * (ratio if cand is spring else 1.0)
         # on top of the spring, what is left of the rebound is a chatter (as it was before)
         own = np.array([on_top, 6.3]) if spring in effects else fitted[id(cand)]
-        return Step(
-            added=[cand],
-            params=[*params, own],
-            err=np.full(1000, rmse),
-            rmse=rmse,
-            aic=1000 * np.log(rmse**2),
-            gain=0.9,
-            judged=(2e-3, rmse, 1e-4),
-            result=None,
-            meaningful=cand.meaningful(own),
-        )
+        return _given(cand, params, own, rmse)
 
     loop = Discoverer.__new__(Discoverer)
     loop.problem = SimpleNamespace(

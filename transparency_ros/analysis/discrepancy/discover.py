@@ -336,6 +336,8 @@ class Discoverer:
             report.findings.append(self._finding(cand, step, base, base.rmse, step.rmse))
             self.progress(f"found {cand.name}: {report.findings[-1].evidence}")
             effects, params, held_err = [*effects, cand], step.params, step.err
+            if step.joint:  # every parameter refitted with it: the findings' values and intervals
+                update_findings(report, effects, params, interval(step.result, step.result.x))
         return effects, params, held_err
 
     def _unnamed(self, cand: Any) -> str:

@@ -47,6 +47,7 @@ def rivals_again(
         i = held[0]
         others, rest = effects[:i] + effects[i + 1 :], params[:i] + params[i + 1 :]
         trial = Report(report.nominal, report.split)
+        trial.findings = report.findings[:i] + report.findings[i + 1 :]  # (as ``others``)
         now, new_params, _ = loop._each_added(
             trial,
             (others, rest, loop.problem.error(others, rest, True)),
@@ -57,8 +58,7 @@ def rivals_again(
         taken = now[len(others) :]
         if len(taken) == 1 and taken[0] is not effects[i]:
             loop.progress(f"{effects[i].name} gives way to {taken[0].name} on the final model")
-            report.findings[i : i + 1] = []
-            report.findings += trial.findings
+            report.findings = trial.findings
             effects, params = now, new_params
             loop._searched.discard(id(taken[0]))  # (it stands for what the recording shows)
     return effects, params
