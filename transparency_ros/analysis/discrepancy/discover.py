@@ -25,9 +25,9 @@ problem with a second channel (``force_view``: a drop test's load cell while the
 the arm) has the candidates not named searched once more there, the effects found held. What
 is left after the search (two decisions taken again on the final model first, ``revisit``: a
 shown effect against its rival, and each searched effect tried again without it) is checked
-for structure (phase RMS against the noise floor, its dominant frequency, how
-much of it the state explains, the closest candidate) and reported as ``unexplained``, never
-forced onto a label.
+for structure (phase RMS against the noise floor, its dominant frequency, how much of it the
+state explains, the closest candidate) and reported as ``unexplained``, never forced onto a
+label.
 """
 
 from __future__ import annotations
@@ -115,9 +115,11 @@ class Discoverer:
         effects, params, held_err, remaining, closest = self._search(
             report, effects, params, held_err, remaining
         )
+        searched = effects
         effects, params = rivals_again(self, report, effects, params, floor)
         effects, params = still_needed(self, report, effects, params, floor)
-        held_err = problem.error(effects, params, True)
+        if effects is not searched:  # (each returns the model it was given where it keeps it)
+            held_err = problem.error(effects, params, True)
         effects, params, held_err = self._checked_last(
             report, effects, params, held_err, remaining=remaining, floor=floor
         )

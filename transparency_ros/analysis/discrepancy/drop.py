@@ -313,8 +313,9 @@ class DropProblem:
         return np.concatenate(index), labels
 
     def force_view(self) -> ForceView | None:
-        """The trials seen through the load cell while the shuttle rides (drop_force)."""
-        return force_view(self)
+        """The trials seen through the load cell while the shuttle rides (drop_force): one
+        view, made once, for the loop's last stage and ``shows_elsewhere``."""
+        return self._load_cell
 
     def shows_elsewhere(self, step: Step, base: Base) -> bool:
         """Whether the load cell in the ride shows what ``step`` adds to the model ``base`` is

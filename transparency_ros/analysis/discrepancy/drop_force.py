@@ -181,12 +181,11 @@ class ForceView:
         new_params: Sequence[FloatArray],
     ) -> str:
         """What the load cell shows of ``added`` (``new_params``: of every effect) acting, where
-        it does ("" where not): the
-        held-out residual of the model (``effects``, ``params``) is structure
-        (``FORCE_SIGNIFICANT``), and with ``added`` it is not. It reads the shuttle's weight
-        directly: on zoo_10297 (a 0.7 ms sensor delay) the weight took the ride's residual
-        from 34 to 0.7 uncertainties while the encoder's held-out error rose by 8 %, and a
-        soft contact was named for the delay."""
+        it does ("" where not): the held-out residual of the model (``effects``, ``params``)
+        is structure (``FORCE_SIGNIFICANT``), and with ``added`` it is not. It reads the
+        shuttle's weight directly: on zoo_10297 (a 0.7 ms sensor delay) the weight took the
+        ride's residual from 34 to 0.7 uncertainties while the encoder's held-out error rose
+        by 8 %, and a soft contact was named for the delay."""
         before = self.error(effects, params, True)
         after = self.error([*effects, *added], new_params, True)
         rms = [float(np.sqrt(np.mean(e**2))) if e.size else 0.0 for e in (before, after)]

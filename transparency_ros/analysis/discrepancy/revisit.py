@@ -39,7 +39,7 @@ def rivals_again(
     it; where it takes the same, neither, or both (the shown effect on top of its rival:
     what is named on top was the loop's to decide, and on zoo_10055 a rebound that took 1 %
     came on top of a true spring here), the one named stays."""
-    for cand in loop._pending_declared([]):
+    for cand in loop.problem.candidates():
         rival = getattr(cand, "rival", None)
         held = [i for i, e in enumerate(effects) if e is cand or e is rival]
         if rival is None or len(held) != 1:
