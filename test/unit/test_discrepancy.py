@@ -11,12 +11,17 @@ import numpy as np
 import pytest
 
 from transparency_ros.analysis.discrepancy.discover import Discoverer, discover
-from transparency_ros.analysis.discrepancy.drop_effects import DropRestitution, HubArmCompliance
+from transparency_ros.analysis.discrepancy.drop_effects import (
+    DropDrift,
+    DropOffset,
+    DropRestitution,
+    HubArmCompliance,
+)
 from transparency_ros.analysis.discrepancy.effects import ParameterDrift, library
 from transparency_ros.analysis.discrepancy.findings import Finding, Report, parameters_text, widen
 from transparency_ros.analysis.discrepancy.fitting import held_at
 from transparency_ros.analysis.discrepancy.model import Trial, load_nominal
-from transparency_ros.analysis.discrepancy.steps import Step, null_inside
+from transparency_ros.analysis.discrepancy.steps import Step, choose, null_inside
 from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.synth.campaign import OUTSIDE, write_campaign
@@ -237,7 +242,7 @@ def test_a_rebound_yields_to_a_spring_that_explains_alike_and_not_to_a_worse_one
             rmse=rmse,
             aic=n * np.log(rmse**2) + 4,
             gain=0.9,
-            judged=(1.0, rmse, 0.1),
+            judged=(1.0, rmse, 1e-4),  # above the floor
             result=None,
             meaningful=True,
         )
@@ -249,6 +254,83 @@ def test_a_rebound_yields_to_a_spring_that_explains_alike_and_not_to_a_worse_one
     assert alike.alternatives == ["restitution"]
     better = chooser._choose([step(rebound, 1.00e-3), step(spring, 1.10e-3)])
     assert better is not None and better.added == [rebound]
+
+
+def test_a_drift_holds_the_terms_that_did_not_drift() -> None:
+    """A drift fitted with all three terms is reduced to those off nominal by more than
+    DRIFT_MIN; the held ones are reported as scales of 1 and act as nominal."""
+    full = DropDrift()
+    reduced = full.reduced(np.array([0.991, 1.0, 1.32]))
+    assert reduced is not None
+    coulomb, start = reduced
+    assert coulomb.free == (False, False, True)
+    assert coulomb.param_names == ("coulomb_scale",)
+    assert start.tolist() == [1.32]
+    assert coulomb.yields_to == 1 and full.yields_to == 0
+    assert coulomb.extra_parameters(start) == {"reflected_inertia_scale": 1.0, "viscous_scale": 1.0}
+    assert coulomb.scales(np.array([1.5])).tolist() == [1.0, 1.0, 1.5]
+    two = full.reduced(np.array([1.7, 1.05, 1.5]))
+    assert two is not None and two[0].free == (True, False, True) and two[0].yields_to == 0
+    assert full.reduced(np.array([1.0, 1.01, 0.99])) is None  # nothing drifted: nothing to hold
+    assert full.reduced(np.array([1.7, 0.5, 1.5])) is None  # every term drifted
+    assert coulomb.reduced(np.array([1.32])) is None
+
+
+def test_an_offset_is_named_over_a_coulomb_drift_that_explains_alike() -> None:
+    """A Coulomb drift alone and a constant offset (one parameter each) that fit the held-out
+    data alike: the offset is named, the drift given as the alternative. A Coulomb drift that
+    fits clearly better (10 %) is named."""
+    coulomb = DropDrift((False, False, True))
+    offset = DropOffset(0.03)
+
+    def step(effect: object, rmse: float) -> Step:
+        n = 10_000
+        return Step(
+            added=[effect],
+            params=[np.array([1.5])],
+            err=np.full(n, rmse),
+            rmse=rmse,
+            aic=n * np.log(rmse**2) + 2,
+            gain=0.9,
+            judged=(1.0, rmse, 1e-4),  # above the floor
+            result=None,
+            meaningful=True,
+        )
+
+    alike = choose([step(coulomb, 1.00e-3), step(offset, 1.00e-3)], lambda _e, _p: False)
+    assert alike is not None and alike.added == [offset]
+    assert alike.alternatives == ["parameter_drift"]
+    better = choose([step(coulomb, 1.00e-3), step(offset, 1.10e-3)], lambda _e, _p: False)
+    assert better is not None and better.added == [coulomb]
+
+
+def test_steps_that_both_reach_the_noise_floor_are_alike() -> None:
+    """Two steps that both explain the held-out data down to its noise floor cannot be told
+    apart, however far apart their RMSEs: the one with fewer parameters is named. Above the
+    floor the better one is."""
+    drift, offset = DropDrift(), DropOffset(0.03)
+
+    def step(effect: object, p: list[float], after: float, floor: float) -> Step:
+        n = 10_000
+        return Step(
+            added=[effect],
+            params=[np.array(p)],
+            err=np.full(n, after),
+            rmse=after,
+            aic=n * np.log(after**2) + 2 * len(p),
+            gain=0.9,
+            judged=(5.0, after, floor),
+            result=None,
+            meaningful=True,
+        )
+
+    steps = [step(drift, [1.04, 0.99, 0.0], 0.31, 1.0), step(offset, [0.07], 0.49, 1.0)]
+    below = choose(steps, lambda _e, _p: False)
+    assert below is not None and below.added == [offset]
+    assert below.alternatives == ["parameter_drift"]
+    steps = [step(drift, [1.04, 0.99, 0.0], 1.31, 1.0), step(offset, [0.07], 1.49, 1.0)]
+    above = choose(steps, lambda _e, _p: False)
+    assert above is not None and above.added == [drift]
 
 
 def test_widen_logs_in_their_natural_unit_and_derived_values_follow() -> None:

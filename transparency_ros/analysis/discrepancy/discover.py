@@ -59,8 +59,10 @@ from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel
 from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
 from transparency_ros.analysis.discrepancy.revisit import rivals_again, still_needed
 from transparency_ros.analysis.discrepancy.steps import (
+    ALIKE,
     Base,
     Step,
+    choose,
     not_named,
     null_inside,
     same,
@@ -70,7 +72,6 @@ from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProb
 from transparency_ros.core.errors import ModelError
 
 PAIR_FINALISTS = 3  # pairs refitted with the effects found before them
-EXPECTED_MARGIN = 1.10  # an effect the recording predicts is preferred this close to the best
 
 
 class Discoverer:
@@ -408,22 +409,33 @@ class Discoverer:
         base: Base,
         *,
         after_search: bool = False,
+        start: FloatArray | None = None,
     ) -> Step:
-        """``cand`` added to the effects found so far: its own parameters fitted, then all of
-        them together (an effect found earlier may have stood in for part of this one)."""
+        """``cand`` added to the effects found so far: its own parameters fitted (from
+        ``start``, None: its own), then all of them together (an effect found earlier may have
+        stood in for part of this one). A drift ``reduced`` to the terms that drifted is taken
+        where it explains the held-out recordings alike (both fits meaningful)."""
         self.progress(f"trying {cand.name}")
-        x, result = fit_candidate(self.problem, effects, params, cand)
+        x, result = fit_candidate(self.problem, effects, params, cand, start)
         joint, together = (
             refit(self.problem, [*effects, cand], [*params, x])
             if getattr(self.problem, "joint_refit", True)
             else ([*params, x], None)
         )
         if together is None:
-            return self._step(
+            step = self._step(
                 effects, [*params, x], [cand], result, base, after_search=after_search
             )
-        step = self._step(effects, joint, [cand], together, base, after_search=after_search)
-        step.joint = True
+        else:
+            step = self._step(effects, joint, [cand], together, base, after_search=after_search)
+            step.joint = True
+        smaller = getattr(cand, "reduced", lambda _p: None)(step.params[-1])
+        if smaller is not None and step.meaningful:
+            held = self._single(
+                effects, params, smaller[0], base, after_search=after_search, start=smaller[1]
+            )
+            if held.rmse <= ALIKE * step.rmse and held.meaningful:
+                return held
         return step
 
     def _step(
@@ -495,38 +507,7 @@ class Discoverer:
         )
 
     def _choose(self, steps: list[Step]) -> Step | None:
-        """The best step by the information criterion. Steps that explain the held-out data
-        alike (within 5 % RMSE) cannot be told apart here: the one with the fewest parameters
-        is named, the others are listed as alternatives. Between steps of as many parameters,
-        one whose fitted values the recording itself predicts comes first (``expected`` of the
-        problem: on a drop test, a payload of the shuttle's own m g r, which a constant offset
-        imitates at small arm angles, or an offset that held the arm away from theta_d before
-        contact), and such a step is considered up to 10 % behind the best. Then a candidate
-        that ``yields_to`` others (a rebound off the contact, which a ring of a compliant arm
-        also makes) comes after them."""
-        if not steps:
-            return None
-        expected = getattr(self.problem, "expected", lambda _e, _p: False)
-        top = min(steps, key=lambda c: c.aic)
-        alike = [c for c in steps if c.rmse <= 1.05 * top.rmse]
-        # what the recording predicts may be 10 % behind the best and still be preferred
-        predicted = [
-            c for c in steps
-            if c.rmse <= EXPECTED_MARGIN * top.rmse and all(expected(a, p) for a, p in c.new())
-        ]  # fmt: skip
-        if predicted and not any(c in predicted for c in alike):
-            alike = [*alike, *predicted]
-        best = min(
-            alike,
-            key=lambda c: (
-                sum(parameter_count(a, p) for a, p in c.new()),
-                not all(expected(a, p) for a, p in c.new()),
-                max(getattr(a, "yields_to", 0) for a in c.added),
-                c.aic,
-            ),
-        )
-        best.alternatives = ["+".join(a.name for a in c.added) for c in alike if c is not best]
-        return best
+        return choose(steps, getattr(self.problem, "expected", lambda _e, _p: False))
 
     def _pairs(
         self,

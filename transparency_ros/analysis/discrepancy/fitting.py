@@ -28,14 +28,20 @@ def aic(err: FloatArray, k: int) -> float:
 
 
 def fit_candidate(
-    problem: Problem, effects: list[Any], params: list[FloatArray], new: Any
+    problem: Problem,
+    effects: list[Any],
+    params: list[FloatArray],
+    new: Any,
+    start: FloatArray | None = None,
 ) -> tuple[FloatArray, Any]:
-    """The parameters of ``new`` added to ``effects`` (theirs held) on the fitting trials:
-    (parameters, least-squares result); the result is None for an effect with nothing to fit."""
+    """The parameters of ``new`` added to ``effects`` (theirs held) on the fitting trials, from
+    ``start`` (None: the problem's initial values of ``new``): (parameters, least-squares
+    result); the result is None for an effect with nothing to fit."""
     # an effect with a choice to make from the data (cogging's period) scans for it against
     # the effects found so far
     scan = getattr(new, "scan", None)
-    start = problem.initial(new) if scan is None else scan(problem, effects, params)
+    if start is None:
+        start = problem.initial(new) if scan is None else scan(problem, effects, params)
     x0 = np.clip(start, new.lower, new.upper)
     if not new.fittable:
         return x0, None
