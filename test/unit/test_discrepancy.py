@@ -225,27 +225,30 @@ def test_effects_that_explain_alike_are_alternatives_and_the_simpler_is_named(
     assert "explained alike by" in finding.evidence
 
 
+def _step(effect: object, p: list[float], rmse: float, floor: float) -> Step:
+    """A single added effect's step of held-out ``rmse``, judged against ``floor``."""
+    n = 10_000
+    return Step(
+        added=[effect],
+        params=[np.array(p)],
+        err=np.full(n, rmse),
+        rmse=rmse,
+        aic=n * np.log(rmse**2) + 2 * len(p),
+        gain=0.9,
+        judged=(5.0, rmse, floor),
+        result=None,
+        meaningful=True,
+    )
+
+
 def test_a_rebound_yields_to_a_spring_that_explains_alike_and_not_to_a_worse_one() -> None:
     """Between a contact's rebound and a hub-arm spring of as many parameters that explain the
     held-out data within 5 %, the spring is named though the rebound fits a little better; a
     rebound that fits clearly better (10 %) is named."""
-    from transparency_ros.analysis.discrepancy.steps import Step  # noqa: PLC0415
-
     rebound, spring = DropRestitution(), HubArmCompliance(loaded_inertia_kgm2=0.01)
 
     def step(effect: object, rmse: float) -> Step:
-        n = 10_000
-        return Step(
-            added=[effect],
-            params=[np.array([0.5, 6.0])],
-            err=np.full(n, rmse),
-            rmse=rmse,
-            aic=n * np.log(rmse**2) + 4,
-            gain=0.9,
-            judged=(1.0, rmse, 1e-4),  # above the floor
-            result=None,
-            meaningful=True,
-        )
+        return _step(effect, [0.5, 6.0], rmse, 1e-4)  # above the floor
 
     chooser = Discoverer.__new__(Discoverer)
     chooser.problem = object()
@@ -284,18 +287,7 @@ def test_an_offset_is_named_over_a_coulomb_drift_that_explains_alike() -> None:
     offset = DropOffset(0.03)
 
     def step(effect: object, rmse: float) -> Step:
-        n = 10_000
-        return Step(
-            added=[effect],
-            params=[np.array([1.5])],
-            err=np.full(n, rmse),
-            rmse=rmse,
-            aic=n * np.log(rmse**2) + 2,
-            gain=0.9,
-            judged=(1.0, rmse, 1e-4),  # above the floor
-            result=None,
-            meaningful=True,
-        )
+        return _step(effect, [1.5], rmse, 1e-4)  # above the floor
 
     alike = choose([step(coulomb, 1.00e-3), step(offset, 1.00e-3)], lambda _e, _p: False)
     assert alike is not None and alike.added == [offset]
@@ -309,20 +301,7 @@ def test_steps_that_both_reach_the_noise_floor_are_alike() -> None:
     apart, however far apart their RMSEs: the one with fewer parameters is named. Above the
     floor the better one is."""
     drift, offset = DropDrift(), DropOffset(0.03)
-
-    def step(effect: object, p: list[float], after: float, floor: float) -> Step:
-        n = 10_000
-        return Step(
-            added=[effect],
-            params=[np.array(p)],
-            err=np.full(n, after),
-            rmse=after,
-            aic=n * np.log(after**2) + 2 * len(p),
-            gain=0.9,
-            judged=(5.0, after, floor),
-            result=None,
-            meaningful=True,
-        )
+    step = _step
 
     steps = [step(drift, [1.04, 0.99, 0.0], 0.31, 1.0), step(offset, [0.07], 0.49, 1.0)]
     below = choose(steps, lambda _e, _p: False)
