@@ -12,7 +12,7 @@ import numpy as np
 from transparency_ros.analysis.discrepancy.drop_bounce import Bounces
 from transparency_ros.analysis.discrepancy.drop_clip import DriveClip
 from transparency_ros.analysis.discrepancy.drop_physics import DropPhysics
-from transparency_ros.analysis.discrepancy.effects import DRIFT_MIN, drifted, pinned
+from transparency_ros.analysis.discrepancy.effects import drifted, drifted_terms, pinned
 from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
 
 LOCAL_GRAVITY_SPREAD = 0.005  # of the weight: what local gravity may differ from the tool's g
@@ -127,8 +127,8 @@ class DropDrift(DropEffect):
         """The drift with its terms that did not drift (within ``DRIFT_MIN`` of nominal) held,
         and the start of its fit; None where none or every one would be held."""
         s = self.scales(p)
-        moved = [bool(f and abs(v - 1.0) > DRIFT_MIN) for f, v in zip(self.free, s, strict=True)]
-        keep = (moved[0], moved[1], moved[2])
+        moved = drifted_terms(s) & np.array(self.free)
+        keep = (bool(moved[0]), bool(moved[1]), bool(moved[2]))
         if keep == self.free or not any(keep):
             return None
         return DropDrift(keep), s[np.array(keep)]

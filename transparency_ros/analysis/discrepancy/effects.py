@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+import numpy.typing as npt
 
 from transparency_ros.analysis.discrepancy.model import (
     FloatArray,
@@ -265,8 +266,13 @@ class ParameterDrift(Effect):
 DRIFT_MIN = 0.2  # a nominal value counts as wrong when off by more than 20 %
 
 
+def drifted_terms(scales: FloatArray) -> npt.NDArray[np.bool_]:
+    """Which scales are off nominal by more than ``DRIFT_MIN``."""
+    return np.abs(np.asarray(scales, dtype=float) - 1.0) > DRIFT_MIN
+
+
 def drifted(scales: FloatArray) -> bool:
-    return bool(np.any(np.abs(np.asarray(scales) - 1.0) > DRIFT_MIN))
+    return bool(np.any(drifted_terms(scales)))
 
 
 def pinned(p: FloatArray, lower: Sequence[float], upper: Sequence[float]) -> bool:

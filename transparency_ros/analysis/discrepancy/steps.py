@@ -106,14 +106,13 @@ def choose(steps: list[Step], expected: Callable[[Any, FloatArray], bool]) -> St
     be told apart here: the one with the fewest parameters is named, the others are listed
     as alternatives. (On the load cell of zoo_10384, a drift and an offset left 0.31 and 0.49
     of its noise: the drift, with two terms that moved 1-4 %, was named; the offset was
-    hidden.) Between steps of as many parameters,
-    one whose fitted values the recording itself predicts comes first (``expected`` of the
-    problem: on a drop test, a payload of the shuttle's own m g r, which a constant offset
-    imitates at small arm angles, or an offset that held the arm away from theta_d before
-    contact), and such a step is considered up to 10 % behind the best. Then a candidate
-    that ``yields_to`` others (a rebound off the contact, which a ring of a compliant arm
-    also makes; a drift of the Coulomb torque alone, which an offset imitates) comes after
-    them."""
+    hidden.) Between steps of as many parameters, one whose fitted values the recording
+    itself predicts comes first (``expected`` of the problem: on a drop test, a payload of
+    the shuttle's own m g r, which a constant offset imitates at small arm angles, or an
+    offset that held the arm away from theta_d before contact), and such a step is
+    considered up to 10 % behind the best. Then a candidate that ``yields_to`` others (a
+    rebound off the contact, which a ring of a compliant arm also makes; a drift of the
+    Coulomb torque alone, which an offset imitates) comes after them."""
     if not steps:
         return None
     top = min(steps, key=lambda c: c.aic)
