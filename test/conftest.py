@@ -10,7 +10,10 @@ background job, ``nohup ... &``) starts pytest with SIGINT ignored, and an ignor
 ignored across fork and exec: the processes the tests start and stop with SIGINT (``bag_replay``,
 ``transparency rig``) would never see it. So SIGINT gets Python's handler here, for the session:
 a handled signal is reset to its default on exec, so every child starts with SIGINT at its
-default; tests that raise SIGINT in this process also take ``sigint_raises``.
+default; tests that raise SIGINT in this process also take ``sigint_raises``. SIGTERM (``kill``,
+a CI runner's cancel) raises KeyboardInterrupt, so the run stops as after Ctrl-C: each test's
+``finally`` and fixtures stop the nodes it started. With Python's default the process died at
+once and a driver node a test had started ran on, publishing, after the suite had gone.
 """
 
 from __future__ import annotations
@@ -30,6 +33,13 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 _SIGINT_AT_START = "ignored" if signal.getsignal(signal.SIGINT) == signal.SIG_IGN else "handled"
 if _SIGINT_AT_START == "ignored":
     signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def _terminated(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+
+
+signal.signal(signal.SIGTERM, _terminated)
 
 
 def pytest_report_header() -> str:
