@@ -21,7 +21,7 @@ from transparency_ros.analysis.discrepancy.effects import ParameterDrift, librar
 from transparency_ros.analysis.discrepancy.findings import Finding, Report, parameters_text, widen
 from transparency_ros.analysis.discrepancy.fitting import held_at
 from transparency_ros.analysis.discrepancy.model import Trial, load_nominal
-from transparency_ros.analysis.discrepancy.steps import Base, Step, choose, null_inside
+from transparency_ros.analysis.discrepancy.steps import Step, choose, null_inside
 from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.synth.campaign import OUTSIDE, write_campaign
@@ -310,31 +310,6 @@ def test_steps_that_both_reach_the_noise_floor_are_alike() -> None:
     steps = [step(drift, [1.04, 0.99, 0.0], 1.31, 1.0), step(offset, [0.07], 1.49, 1.0)]
     above = choose(steps, lambda _e, _p: False)
     assert above is not None and above.added == [drift]
-
-
-def test_pairs_are_tried_where_one_sensors_error_is_left_above_three_floors() -> None:
-    """Pairs are fitted where the pooled held-out error is above 3x the noise floor, and also
-    where it is not but one sensor's part of it is above 3x that sensor's own floor (the
-    problem's leftover_scope, asked with that factor): an encoder's error beside a quieter
-    potentiometer. Below both, nothing is paired."""
-    encoder = np.r_[np.ones(100, dtype=bool), np.zeros(900, dtype=bool)]
-
-    def leftover_scope(err: np.ndarray, factor: float = 1.5) -> tuple | None:
-        floor = 1e-3  # the encoder's own floor
-        return (encoder, floor) if np.sqrt(np.mean(err[encoder] ** 2)) > factor * floor else None
-
-    looker = Discoverer.__new__(Discoverer)
-    looker.problem = SimpleNamespace(leftover_scope=leftover_scope)
-
-    def base(encoder_rmse: float, rest: float, floor: float) -> Base:
-        err = np.where(encoder, encoder_rmse, rest)
-        return Base(err, float(np.sqrt(np.mean(err**2))), 0.0, floor)
-
-    assert looker._pairs_due(base(1e-3, 5e-3, 1e-3))  # pooled 4.8x its floor
-    assert looker._pairs_due(base(3.2e-3, 1e-3, 1e-3))  # pooled 1.4x, the encoder's 3.2x
-    assert not looker._pairs_due(base(2.5e-3, 1e-3, 1e-3))  # the encoder's 2.5x: noise-like
-    looker.problem = SimpleNamespace()  # a problem of one channel: the pooled error decides
-    assert not looker._pairs_due(base(3.2e-3, 1e-3, 1e-3))
 
 
 def test_widen_logs_in_their_natural_unit_and_derived_values_follow() -> None:

@@ -170,7 +170,7 @@ class Discoverer:
                 step = self._choose(
                     [s for s in self._with_declared(effects, singles, base) if self._names(s, base)]
                 )
-            if step is None and self._pairs_due(base) and getattr(problem, "pairs", True):
+            if step is None and base.rmse > LEFTOVER * floor and getattr(problem, "pairs", True):
                 # structure is left that no single effect explains: two missing effects may
                 # each explain too little alone (one stands in for the other). Not below: a
                 # pair fitted to what is nearly noise explains noise.
@@ -202,18 +202,6 @@ class Discoverer:
                 effects, params, held_err = self._declared(report, effects, params, held_err, floor)
             remaining = not_named(remaining, effects)
         return effects, params, held_err, remaining, closest
-
-    def _pairs_due(self, base: Base) -> bool:
-        """Whether what is left is far enough above noise to fit pairs to: the pooled error
-        above LEFTOVER (3) times the floor, or one sensor's part above 3 times its own floor
-        (``leftover_scope``). Pooled only, a potentiometer's noise hid an encoder's error of
-        3x its floor that a sensor delay and the encoder's lattice together explain and
-        neither alone (zoo_10465: 0.0027 rad against a floor of 0.00089 on the encoder, the
-        pooled 0.0020 against 0.00097)."""
-        if base.rmse > LEFTOVER * base.floor:
-            return True
-        scope = getattr(self.problem, "leftover_scope", lambda _e, _f: None)
-        return scope(base.err, LEFTOVER) is not None
 
     def _on_load_cell(
         self,

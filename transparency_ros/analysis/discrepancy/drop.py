@@ -369,20 +369,19 @@ class DropProblem:
         pooled = float(np.sqrt(np.mean(err**2))) > SIGNIFICANT * self.noise_floor()
         return pooled or self.leftover_scope(err) is not None
 
-    def leftover_scope(
-        self, err: FloatArray, factor: float = SIGNIFICANT
-    ) -> tuple[BoolArray, float] | None:
-        """The encoder's error elements and floor, when its part of ``err`` is above ``factor``
-        (1.5) times that floor: what is left there is judged there (a dynamics effect that
-        removes it removes the encoder's error; one fitted to the heights' noise does not). The
-        encoder's floor is its noise at rest or a count's quantization error (count / sqrt 12),
-        whichever is larger: a fine encoder at rest reads one value, a floor of 0 that any
-        error exceeds."""
+    def leftover_scope(self, err: FloatArray) -> tuple[BoolArray, float] | None:
+        """The encoder's error elements and floor, when its part of ``err`` is above 1.5x that
+        floor: what is left there is judged there (a dynamics effect that removes it removes
+        the encoder's error; one fitted to the heights' noise does not). The encoder's floor is
+        its noise at rest or a count's quantization error (count / sqrt 12), whichever is
+        larger: a fine encoder at rest reads one value, a floor of 0 that any error exceeds."""
         enc = self._encoder_elements
         if not enc.any():
             return None
         floor = self._encoder_floor
-        return (enc, floor) if float(np.sqrt(np.mean(err[enc] ** 2))) > factor * floor else None
+        return (
+            (enc, floor) if float(np.sqrt(np.mean(err[enc] ** 2))) > SIGNIFICANT * floor else None
+        )
 
     @cached_property
     def _encoder_floor(self) -> float:

@@ -161,7 +161,7 @@ class ForceView:
     def structure_left(self, err: FloatArray) -> bool:
         return bool(err.size) and float(np.sqrt(np.mean(err**2))) > FORCE_SIGNIFICANT
 
-    def leftover_scope(self, err: FloatArray, factor: float = 0.0) -> None:
+    def leftover_scope(self, err: FloatArray) -> None:
         return None
 
     def sensor_scope(self, effects: Sequence[DropEffect], after_search: bool = False) -> None:
