@@ -301,13 +301,12 @@ def test_steps_that_both_reach_the_noise_floor_are_alike() -> None:
     apart, however far apart their RMSEs: the one with fewer parameters is named. Above the
     floor the better one is."""
     drift, offset = DropDrift(), DropOffset(0.03)
-    step = _step
 
-    steps = [step(drift, [1.04, 0.99, 0.0], 0.31, 1.0), step(offset, [0.07], 0.49, 1.0)]
+    steps = [_step(drift, [1.04, 0.99, 0.0], 0.31, 1.0), _step(offset, [0.07], 0.49, 1.0)]
     below = choose(steps, lambda _e, _p: False)
     assert below is not None and below.added == [offset]
     assert below.alternatives == ["parameter_drift"]
-    steps = [step(drift, [1.04, 0.99, 0.0], 1.31, 1.0), step(offset, [0.07], 1.49, 1.0)]
+    steps = [_step(drift, [1.04, 0.99, 0.0], 1.31, 1.0), _step(offset, [0.07], 1.49, 1.0)]
     above = choose(steps, lambda _e, _p: False)
     assert above is not None and above.added == [drift]
 
