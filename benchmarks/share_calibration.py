@@ -1,0 +1,241 @@
+"""Per-candidate thresholds of the discrepancy tool, calibrated where each effect is absent.
+
+    .venv/bin/python benchmarks/share_calibration.py log --zoo DIR --seeds 10300-10399 \
+        --log LOG.jsonl [--jobs N]
+    .venv/bin/python benchmarks/share_calibration.py table LOG.jsonl[.gz]... [--out DIR]
+
+The shares shipped come from ``table benchmarks/results/share_calibration/*.jsonl.gz`` (the
+logs of seeds 10300-10499, compressed).
+
+A drop-test effect is named where it removes a share of the held-out error above the noise
+floor (``Discoverer._names``). One share for every effect (0.75) was a hand-set margin: a
+cogging the fit finds (its size and period within 10 % of the truth) removes 0.5-0.7 of it
+beside the model's own error in the contact and friction laws, which the noise floor does not
+count, while a drift or a spring standing in for something else may remove as much.
+
+``log`` runs the tool on drop_zoo campaigns (``../shared/plants/drop_zoo.py``, made beforehand
+with it: ``drop_zoo.py DIR --seeds ...``) under the one share for every effect, and writes
+every candidate's single step (each round, each stage: kinematics, load cell) with the
+campaign's truth: JSON lines, one per campaign, appended (a campaign already in the log is
+skipped).
+
+``table`` reads such logs. Per candidate, the *decisive share* in a campaign is the largest
+share it removed in a round where it would have been named had its own threshold been lower:
+its fit meaningful, its interval off its null, a tenth of the floor removed, the held-out
+information criterion better by 10, and no step named in that round better by the criterion.
+Over the campaigns where the effect is absent (neither required nor allowed by the truth) the
+decisive shares are what a threshold must refuse: each candidate's share is the least of
+0.50, 0.55, ..., 0.95 at which at most ``RATE`` of those campaigns would have named it, and
+never below 0.5 (an effect that is there explains most of what is left). A campaign that
+names it falsely even at 0.95 does not count (it stood in for all of the error there, which
+no share refuses); a candidate absent from fewer than ``MIN_ABSENT`` campaigns (the
+encoder's lattice, allowed wherever an encoder is coarse) keeps the uniform share. Where the
+effect was hidden, the table counts how many campaigns each share names. Writes
+results/share_calibration.md (+ .json); ``drop.SHARE_NEEDED`` holds its shares (a unit test
+compares them).
+
+The figures are first-order: the logged rounds of the uniform rule, not a re-run with the new
+shares (a name taken earlier changes the rounds after it); the zoo survey on fresh seeds is
+the measure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import sys
+from collections import defaultdict
+from multiprocessing import Pool
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+RATE = 0.01  # campaigns (where the effect is absent) that may name it
+MIN_ABSENT = 50  # a candidate absent from fewer campaigns keeps the uniform share
+SHARES = [round(0.5 + 0.05 * k, 2) for k in range(10)]  # 0.50 ... 0.95
+UNIFORM = 0.75  # the one share the logs are made under
+
+
+def log_campaign(campaign: Path) -> dict[str, Any]:
+    """The tool on one campaign under the uniform share, every single step recorded."""
+    from transparency_ros.analysis.discrepancy import discover as d  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.drop import (  # noqa: PLC0415
+        DropProblem,
+        load_drop_nominal,
+        load_drop_trial,
+    )
+    from transparency_ros.analysis.discrepancy.steps import null_inside  # noqa: PLC0415
+    from transparency_ros.bag.reader import find_bags  # noqa: PLC0415
+
+    steps: list[dict[str, Any]] = []
+
+    class Logged(d.Discoverer):
+        def _single(self, effects, params, cand, base, **kw):  # type: ignore[no-untyped-def]
+            s = super()._single(effects, params, cand, base, **kw)
+            steps.append({
+                "stage": type(self.problem).__name__,
+                "before": [e.name for e in effects],
+                "cand": cand.name,
+                "gain": float(s.gain),
+                "judged": [float(x) for x in s.judged],
+                "daic": float(s.aic - base.aic),
+                "meaningful": bool(s.meaningful),
+                "null_in": bool(null_inside(s)),
+                "names": bool(self._names(s, base)),
+                "params": [float(v) for v in s.params[-1]],
+                "after_search": bool(kw.get("after_search", False)),
+            })  # fmt: skip
+            return s
+
+    try:
+        trials = [load_drop_trial(b) for b in find_bags([str(campaign)])]
+        problem = DropProblem(trials, load_drop_nominal(None, trials))
+        declared = [c.name for c in problem.candidates() if getattr(c, "declared", False)]
+        report = Logged(problem, min_improvement=UNIFORM).run()
+        found: Any = [f.effect for f in report.findings]
+    except Exception as err:  # noqa: BLE001 - a failure is a result here, with its reason
+        found, declared = f"error: {type(err).__name__}: {err}", []
+    return {"campaign": campaign.name, "found": found, "declared": declared, "steps": steps}
+
+
+def decisive(row: dict[str, Any]) -> dict[str, float]:
+    """Per candidate (not declared: those are named by another rule), its decisive share in
+    this campaign (module docstring); candidates that never had such a round are left out."""
+    rounds: dict[tuple[Any, ...], list[dict[str, Any]]] = defaultdict(list)
+    for s in row["steps"]:
+        rounds[(s["stage"], tuple(s["before"]), s["after_search"])].append(s)
+    best: dict[str, float] = {}
+    for steps in rounds.values():
+        named = [s for s in steps if s["names"]]
+        top = min((s["daic"] for s in named), default=0.0)
+        for s in steps:
+            before, after, floor = s["judged"]
+            if (
+                s["cand"] not in row["declared"]
+                and s["meaningful"]
+                and not s["null_in"]
+                and before - after >= 0.1 * floor
+                and s["daic"] < -10
+                and s["daic"] <= top
+            ):
+                best[s["cand"]] = max(best.get(s["cand"], -np.inf), s["gain"])
+    return best
+
+
+def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
+    candidates = sorted({s["cand"] for r in rows for s in r["steps"]} - {
+        c for r in rows for c in r["declared"]
+    })  # fmt: skip
+    per: dict[str, Any] = {}
+    for cand in candidates:
+        absent, hidden = [], []
+        for r in rows:
+            truth = r["truth"]
+            share = decisive(r).get(cand, -np.inf)
+            if cand in truth["required"]:
+                hidden.append(share)
+            elif cand not in truth["allowed"]:
+                absent.append(share)
+        a, h = np.array(absent), np.array(hidden)
+        named_absent = {t: int(np.sum(a >= t)) for t in SHARES}
+        # (where it is named falsely at the highest share too, it stands in for the whole
+        # error there: no share refuses that, and those campaigns do not count against any)
+        allowed = named_absent[SHARES[-1]] + int(RATE * a.size)
+        share = (
+            next(t for t in SHARES if named_absent[t] <= allowed)
+            if a.size >= MIN_ABSENT
+            else UNIFORM
+        )
+        per[cand] = {
+            "share": share,
+            "absent_campaigns": int(a.size),
+            "hidden_campaigns": int(h.size),
+            "named_where_absent": {str(t): n for t, n in named_absent.items()},
+            "named_where_hidden": {str(t): int(np.sum(h >= t)) for t in SHARES},
+        }
+    lines = [
+        "# Per-candidate shares (drop tests), calibrated where each effect is absent",
+        "",
+        f"Campaigns: {len(rows)} ({', '.join(sorted({r['campaign'][:-2] + 'xx' for r in rows}))}),"
+        f" logged under one share ({UNIFORM}) for every effect. A candidate's share is the least"
+        f" of {SHARES[0]}-{SHARES[-1]} at which at most {RATE:.0%} of the campaigns where it"
+        f" is absent would have named it, those that name it at {SHARES[-1]} too not counted;"
+        f" absent from fewer than {MIN_ABSENT}: {UNIFORM} (first-order: the logged rounds).",
+        "",
+        "| candidate | share | absent in | named where absent at 0.5 / 0.6 / 0.75 / share |"
+        " hidden in | named where hidden at 0.5 / 0.6 / 0.75 / share |",
+        "|---|---|---|---|---|---|",
+    ]
+    for cand, p in per.items():
+        at = [str(t) for t in (0.5, 0.6, UNIFORM, p["share"])]
+        lines.append(
+            f"| {cand} | {p['share']:.2f} | {p['absent_campaigns']} | "
+            + " / ".join(str(p["named_where_absent"].get(t, 0)) for t in at)
+            + f" | {p['hidden_campaigns']} | "
+            + " / ".join(str(p["named_where_hidden"].get(t, 0)) for t in at)
+            + " |"
+        )
+    return lines, {"rate": RATE, "uniform": UNIFORM, "campaigns": len(rows), "candidates": per}
+
+
+def main(argv: list[str] | None = None) -> int:
+    from _results import write_results  # noqa: PLC0415
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    log = sub.add_parser("log", help="run the tool on campaigns, every single step logged")
+    log.add_argument("--zoo", type=Path, required=True, help="campaigns made by drop_zoo.py")
+    log.add_argument("--seeds", required=True, help="A-B")
+    log.add_argument("--log", type=Path, required=True, help="JSON lines, appended")
+    log.add_argument("--jobs", type=int, default=1, help="campaigns analysed at once")
+    tab = sub.add_parser("table", help="the shares from logs")
+    tab.add_argument("logs", type=Path, nargs="+")
+    tab.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    args = parser.parse_args(argv)
+    if args.command == "log":
+        return _log(parser, args)
+    rows = [json.loads(line) for path in args.logs for line in _read(path).splitlines()]
+    rows = [r for r in rows if isinstance(r["found"], list)]
+    if not rows:
+        parser.error("no campaign analysed without error in the logs")
+    lines, data = table(rows)
+    write_results(args.out, "share_calibration", lines, data)
+    return 0
+
+
+def _read(path: Path) -> str:
+    """A log's text (``.gz``: compressed, as the committed logs are)."""
+    return gzip.decompress(path.read_bytes()).decode() if path.suffix == ".gz" else path.read_text()
+
+
+def _log(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    answers_file = args.zoo / "answers.yaml"
+    if not answers_file.is_file():
+        parser.error(f"--zoo {args.zoo}: no answers.yaml (make it with drop_zoo.py)")
+    answers = yaml.safe_load(answers_file.read_text())
+    first, _, last = args.seeds.partition("-")
+    seeds = range(int(first), int(last or first) + 1)
+    done = set()
+    if args.log.is_file():
+        done = {json.loads(line)["campaign"] for line in args.log.read_text().splitlines()}
+    todo = [args.zoo / f"zoo_{s}" for s in seeds if f"zoo_{s}" not in done]
+    missing = [c.name for c in todo if c.name not in answers]
+    if missing:
+        parser.error(f"--zoo {args.zoo}: no campaign {missing[0]} in answers.yaml")
+    args.log.parent.mkdir(parents=True, exist_ok=True)
+    with Pool(args.jobs) as pool, args.log.open("a") as out:
+        for k, row in enumerate(pool.imap(log_campaign, todo), 1):
+            row["truth"] = answers[row["campaign"]]
+            out.write(json.dumps(row) + "\n")
+            out.flush()
+            print(f"[{k}/{len(todo)}] {row['campaign']}: {row['found']}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
