@@ -74,21 +74,6 @@ __all__ = ["PHASES", "DropProblem", "DropTrial", "load_drop_nominal", "load_drop
 BoolArray = npt.NDArray[np.bool_]
 MODEL_ERROR_SHARE = 0.2
 PHASES = ("before_contact", "impact", "deflection", "rebound", "reversal", "stuck")
-# The share of the held-out error above the floor each searched candidate must remove to be
-# named (DropProblem.share_needed): the least at which it was named in at most 1 % of the
-# drop_zoo campaigns where it was absent (seeds 10300-10499), 0.5 at least; min_improvement
-# for any other. Calibrated by benchmarks/share_calibration.py (results/share_calibration.md).
-SHARE_NEEDED: dict[str, float] = {
-    "backlash": 0.85,
-    "cogging": 0.7,
-    "impact_speed_loss": 0.5,
-    "parameter_drift": 0.85,
-    "quantization": 0.75,
-    "sensor_delay": 0.6,
-    "stiction": 0.75,
-    "structural_compliance": 0.75,
-    "torque_offset": 0.65,
-}
 
 
 class _Set:
@@ -213,10 +198,9 @@ class DropProblem:
         self.fit = _Set(self.fit_trials)
         self.held = _Set(self.held_trials)
         self.model = nominal
-        # (for a candidate SHARE_NEEDED does not list) concealed drop-test effects remove
-        # >= 80 % of the held-out error above the floor in the survey's campaigns; restitution
-        # or an offset standing in for friction that varies with position (outside the
-        # library) 50-65 %
+        # concealed drop-test effects remove >= 80 % of the held-out error above the floor in the
+        # survey's campaigns; restitution or an offset standing in for friction that varies with
+        # position (outside the library) 50-65 %
         self.min_improvement = 0.75
         # the model's own error in a fitted value, a share of it (findings.widen): on the zoo's
         # development campaigns (seeds 0-89, never reported) the intervals from the fit alone
@@ -283,10 +267,6 @@ class DropProblem:
 
     def candidates(self) -> list[DropEffect]:
         return list(self._candidates)
-
-    def share_needed(self, effect: DropEffect) -> float:
-        """The share of the error above the floor ``effect`` must remove (``SHARE_NEEDED``)."""
-        return SHARE_NEEDED.get(effect.name, self.min_improvement)
 
     def initial(self, effect: DropEffect) -> FloatArray:
         return effect.initial(self)
