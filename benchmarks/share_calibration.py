@@ -235,11 +235,23 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "log":
         return _log(parser, args)
-    rows = [json.loads(line) for path in args.logs for line in _read(path).splitlines()]
+    rows = []
+    for path in args.logs:
+        try:
+            rows += [json.loads(line) for line in _read(path).splitlines()]
+        except (OSError, ValueError) as err:  # (json and gzip errors are ValueErrors)
+            parser.error(f"{path}: not a log of this script ({err})")
+        keys = {"campaign", "found", "declared", "steps", "truth"}
+        if any(not isinstance(r, dict) or not keys <= r.keys() for r in rows):
+            parser.error(f"{path}: not a log of this script (a line without {sorted(keys)})")
+    failed = [r["campaign"] for r in rows if not isinstance(r["found"], list)]
     rows = [r for r in rows if isinstance(r["found"], list)]
     if not rows:
         parser.error("no campaign analysed without error in the logs")
     lines, data = table(rows)
+    if failed:  # (said, not dropped silently)
+        lines[2:2] = [f"Left out, the tool failed on them: {', '.join(failed)}.", ""]
+        data["failed"] = failed
     write_results(args.out, "share_calibration", lines, data)
     return 0
 
@@ -255,6 +267,8 @@ def _log(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         parser.error(f"--zoo {args.zoo}: no answers.yaml (make it with drop_zoo.py)")
     answers = yaml.safe_load(answers_file.read_text())
     first, _, last = args.seeds.partition("-")
+    if not (first.isdigit() and (last or first).isdigit()):
+        parser.error(f"--seeds {args.seeds!r}: expected A-B or A (numbers)")
     seeds = range(int(first), int(last or first) + 1)
     done = set()
     if args.log.is_file():
