@@ -125,11 +125,16 @@ def decisive(row: dict[str, Any]) -> dict[str, float]:
     return best
 
 
-def _verdicts(rows: list[dict[str, Any]], cand: str) -> list[tuple[str, float, bool]]:
+def _verdicts(
+    rows: list[dict[str, Any]], cand: str, decided: list[dict[str, float]] | None = None
+) -> list[tuple[str, float, bool]]:
     """Per campaign where ``cand`` is hidden ("hidden") or absent ("absent": neither required
-    nor allowed): its decisive share (-inf: none) and whether the uniform rule named it."""
+    nor allowed): its decisive share (-inf: none) and whether the uniform rule named it.
+    ``decided``: each row's :func:`decisive` shares, worked out once for every candidate."""
+    if decided is None:
+        decided = [decisive(r) for r in rows]
     out = []
-    for r in rows:
+    for r, shares in zip(rows, decided, strict=True):
         truth = r["truth"]
         kind = (
             "hidden"
@@ -137,7 +142,7 @@ def _verdicts(rows: list[dict[str, Any]], cand: str) -> list[tuple[str, float, b
             else ("absent" if cand not in truth["allowed"] else "")
         )
         if kind:
-            out.append((kind, decisive(r).get(cand, -np.inf), cand in r["found"]))
+            out.append((kind, shares.get(cand, -np.inf), cand in r["found"]))
     return out
 
 
@@ -165,8 +170,9 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
         c for r in rows for c in r["declared"]
     })  # fmt: skip
     per: dict[str, Any] = {}
+    decided = [decisive(r) for r in rows]
     for cand in candidates:
-        verdicts = _verdicts(rows, cand)
+        verdicts = _verdicts(rows, cand, decided)
         absent = np.array([d for k, d, _ in verdicts if k == "absent"])
         named_absent = {t: int(np.sum(absent >= t)) for t in SHARES}
         # the false-naming rule: (where it is named falsely at the highest share too, it
