@@ -18,16 +18,28 @@ def _effect(name: str, **flags: bool) -> SimpleNamespace:
     return SimpleNamespace(name=name, fittable=False, meaningful=lambda _p: True, **flags)
 
 
-def _loop(gains: dict[str, float], searched: tuple[object, ...]) -> Discoverer:
+def _loop(
+    gains: dict[str, float], searched: tuple[object, ...], starts: dict[str, object] | None = None
+) -> Discoverer:
     """A loop whose candidate, added to the final model without it, removes ``gains[name]``
-    of the error left (2 mrad, floor 0.1 mrad), and whose search named ``searched`` alone."""
+    of the error left (2 mrad, floor 0.1 mrad), and whose search named ``searched`` alone;
+    each candidate's fit start is recorded in ``starts``."""
     loop = Discoverer.__new__(Discoverer)
     loop.problem = SimpleNamespace(error=lambda *_a: np.full(1000, 2e-3))
     loop.min_improvement = 0.75
+    loop._given = None
     loop.progress = lambda _t: None
     loop._searched = {id(p) for p in searched}
 
-    def single(effects: list[object], params: list[np.ndarray], cand: object, base: Base) -> Step:
+    def single(
+        effects: list[object],
+        params: list[np.ndarray],
+        cand: object,
+        base: Base,
+        start: np.ndarray | None = None,
+    ) -> Step:
+        if starts is not None:
+            starts[cand.name] = start
         after = base.rmse - gains[cand.name] * (base.rmse - base.floor)
         return Step(
             added=[cand],
@@ -81,3 +93,38 @@ def test_what_still_explains_enough_and_what_the_search_did_not_name_alone_stay(
     loop = _loop({"backlash": 0.8, "sensor_delay": 0.9, "torque_offset": 0.0}, (first, second))
     kept, _ = still_needed(loop, report, effects, [np.zeros(1)] * 3, 1e-4)
     assert kept == effects and len(report.findings) == 3
+
+
+def test_an_effect_is_tried_again_as_it_was_named() -> None:
+    """The re-test starts from the effect's values in the final model (so that a choice made
+    from the data when it was named, cogging's period, is kept: zoo_10679, a cogging found at
+    298 periods per revolution was scanned again to 306 on the model without it and dropped)."""
+    offset, cogging = _effect("torque_offset"), _effect("cogging")
+    effects = [offset, cogging]
+    values = [np.array([0.05]), np.array([0.0505, -1.36])]
+    starts: dict[str, object] = {}
+    loop = _loop({"torque_offset": 0.9, "cogging": 0.9}, (offset, cogging), starts)
+    kept, _ = still_needed(loop, _report(effects), effects, values, 1e-4)
+    assert kept == effects
+    assert starts["torque_offset"] is values[0] and starts["cogging"] is values[1]
+
+
+def test_fit_candidate_scans_only_without_a_start() -> None:
+    """An effect with a choice to make from the data (``scan``: cogging's period) makes it when
+    no start is given, and keeps the one it has when its fit starts from given values."""
+    from transparency_ros.analysis.discrepancy.fitting import fit_candidate  # noqa: PLC0415
+
+    scans: list[int] = []
+
+    class Wave:
+        name, fittable = "cogging", False
+        lower, upper = (0.0, -7.0), (1.0, 7.0)
+
+        def scan(self, *_a: object) -> np.ndarray:
+            scans.append(1)
+            return np.array([0.02, 0.0])
+
+    x, _ = fit_candidate(SimpleNamespace(), [], [], Wave())
+    assert scans == [1] and np.allclose(x, [0.02, 0.0])
+    x, _ = fit_candidate(SimpleNamespace(), [], [], Wave(), np.array([0.05, -1.0]))
+    assert scans == [1] and np.allclose(x, [0.05, -1.0])

@@ -74,9 +74,13 @@ def still_needed(
     """Each effect the search named alone (``_searched`` of the loop, in the order found: not
     those declared or shown, named as a pair or standing for a shown effect), taken out of
     the final model, the others refitted without it, and tried again by the rule that named
-    it (``_names``). One that no longer names is dropped with its finding, and a note says
-    so: what it explained when it was named, an effect found after it explains now. The
-    others keep the values refitted without it."""
+    it (``_names``). It is tried again as it was named: its fit starts from its values in the
+    final model, and a choice made from the data when it was named (cogging's period) is
+    kept, not made again on a model without it (zoo_10679: a cogging named at 298 periods per
+    revolution, truth 297, removing 0.83 of the error, was scanned again to 306 here and
+    removed 0.71, and was dropped). One that no longer names is dropped with its finding, and
+    a note says so: what it explained when it was named, an effect found after it explains
+    now. The others keep the values refitted without it."""
     i = 0
     while i < len(effects):
         cand = effects[i]
@@ -87,7 +91,7 @@ def still_needed(
         rest, result = refit(loop.problem, others, rest)
         err = loop.problem.error(others, rest, True)
         base = Base(err, rmse(err), aic(err, total(rest)), floor, others, rest)
-        step = loop._single(others, rest, cand, base)
+        step = loop._single(others, rest, cand, base, start=params[i])
         if loop._names(step, base):
             i += 1
             continue
