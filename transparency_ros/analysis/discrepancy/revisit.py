@@ -35,10 +35,14 @@ def rivals_again(
     an effect the search found later may have made the two alike by its absence
     (zoo_10202: a rebound yielded to a hub spring whose held-out RMSE was 1.01 times its own;
     with the 1.6 ms sensor delay found after, the spring's was 1.26 times). Where it takes
-    the other one alone, that one replaces the one named, the other effects refitted with
-    it; where it takes the same, neither, or both (the shown effect on top of its rival:
-    what is named on top was the loop's to decide, and on zoo_10055 a rebound that took 1 %
-    came on top of a true spring here), the one named stays."""
+    the other one first, the decision stands as taken, the other effects refitted with it:
+    the named one's rival alone, or a rebound named that now gives way to the spring and
+    comes back on top of it (zoo_10665: a rebound named before the rail friction found
+    after it; on the final model the spring explains the recordings better, 0.96 times the
+    rebound's RMSE, and the load cell's bounces still name a rebound on top). Where it takes
+    the same one first (a spring named, and a rebound on top of it now: what is named on top
+    of a spring was the search's to decide, and on zoo_10055 a rebound that took 1 % came on
+    top of a true spring here), neither, or nothing, the one named stays."""
     for cand in loop.problem.candidates():
         rival = getattr(cand, "rival", None)
         held = [i for i, e in enumerate(effects) if e is cand or e is rival]
@@ -56,8 +60,11 @@ def rivals_again(
             loop._takes_declared,
         )
         taken = now[len(others) :]
-        if len(taken) == 1 and taken[0] is not effects[i]:
-            loop.progress(f"{effects[i].name} gives way to {taken[0].name} on the final model")
+        if taken and taken[0] is not effects[i]:
+            loop.progress(
+                f"{effects[i].name} gives way to {' + '.join(t.name for t in taken)} on the"
+                " final model"
+            )
             report.findings = trial.findings
             effects, params = now, new_params
             loop._searched.discard(id(taken[0]))  # (it stands for what the recording shows)
@@ -74,13 +81,14 @@ def still_needed(
     """Each effect the search named alone (``_searched`` of the loop, in the order found: not
     those declared or shown, named as a pair or standing for a shown effect), taken out of
     the final model, the others refitted without it, and tried again by the rule that named
-    it (``_names``). It is tried again as it was named: its fit starts from its values in the
-    final model, and a choice made from the data when it was named (cogging's period) is
-    kept, not made again on a model without it (zoo_10679: a cogging named at 298 periods per
-    revolution, truth 297, removing 0.83 of the error, was scanned again to 306 here and
-    removed 0.71, and was dropped). One that no longer names is dropped with its finding, and
-    a note says so: what it explained when it was named, an effect found after it explains
-    now. The others keep the values refitted without it."""
+    it (``_names``). A choice made from the data when it was named (cogging's period,
+    ``scan``) is kept, its fit started from its values in the final model, not made again on
+    a model without it (zoo_10679: a cogging named at 298 periods per revolution, truth 297,
+    removing 0.83 of the error, was scanned again to 306 here and removed 0.71, and was
+    dropped); the others are fitted from their own starts, as in the search. One that no
+    longer names is dropped with its finding, and a note says so: what it explained when it
+    was named, an effect found after it explains now. The others keep the values refitted
+    without it."""
     i = 0
     while i < len(effects):
         cand = effects[i]
@@ -91,7 +99,9 @@ def still_needed(
         rest, result = refit(loop.problem, others, rest)
         err = loop.problem.error(others, rest, True)
         base = Base(err, rmse(err), aic(err, total(rest)), floor, others, rest)
-        step = loop._single(others, rest, cand, base, start=params[i])
+        # (a choice made from the data when it was named kept: the fit starts from its values)
+        start = params[i] if getattr(cand, "scan", None) is not None else None
+        step = loop._single(others, rest, cand, base, start=start)
         if loop._names(step, base):
             i += 1
             continue
