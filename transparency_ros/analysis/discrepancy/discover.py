@@ -86,7 +86,6 @@ class Discoverer:
         progress: Callable[[str], None] = lambda _t: None,
     ) -> None:
         self.problem = problem
-        self._given = min_improvement  # (None: the problem's, per candidate where it says)
         self.min_improvement = (
             problem.min_improvement if min_improvement is None else min_improvement
         )
@@ -227,7 +226,7 @@ class Discoverer:
         self.progress("searching the load cell")
         view.start(effects, params)
         # (the loop's own class: a subclass that logs its steps, benchmarks/share_calibration)
-        stage = type(self)(view, min_improvement=self._given, progress=self.progress)
+        stage = type(self)(view, min_improvement=self.min_improvement, progress=self.progress)
         found = len(effects)
         effects, params, *_ = stage._search(
             report, effects, params, view.error(effects, params, True), remaining
@@ -493,8 +492,7 @@ class Discoverer:
 
     def _names(self, step: Step, base: Base) -> bool:
         """Whether ``step`` names its effects: it removes at least ``min_improvement`` of the
-        held-out error above the noise floor (per candidate where the problem says:
-        share_needed), a tenth of the floor at least (both on the error
+        held-out error above the noise floor, a tenth of the floor at least (both on the error
         it is judged on, see _judged), improves the information criterion by 10, every effect
         in it is meaningful (no drift scales near 1, no fit against a bound, no rebound below
         what it shows) and its interval excludes its null value; a pair also beats each of
@@ -504,21 +502,10 @@ class Discoverer:
             step.meaningful
             and not null_inside(step)
             and step.judged[0] - step.judged[1] >= 0.1 * step.judged[2]
-            and step.gain >= self.share_needed(step.added)
+            and step.gain >= self.min_improvement
             and step.aic < base.aic - 10
             and all(step.aic < a - 10 for a in step.alone_aic)
         )
-
-    def share_needed(self, added: list[Any]) -> float:
-        """The share of the error above the floor ``added`` must remove (_names): the
-        problem's own per candidate where it has them (``share_needed`` of a drop test), the
-        strictest of a pair's (a declared effect beside a searched one: the searched one's);
-        ``min_improvement`` where the problem has none or a share was given to the loop."""
-        own = getattr(self.problem, "share_needed", None)
-        searched = [a for a in added if not getattr(a, "declared", False)]
-        if own is None or self._given is not None or not searched:
-            return self.min_improvement
-        return max(float(own(a)) for a in searched)
 
     def _choose(self, steps: list[Step]) -> Step | None:
         return choose(steps, getattr(self.problem, "expected", lambda _e, _p: False))

@@ -74,14 +74,6 @@ __all__ = ["PHASES", "DropProblem", "DropTrial", "load_drop_nominal", "load_drop
 BoolArray = npt.NDArray[np.bool_]
 MODEL_ERROR_SHARE = 0.2
 PHASES = ("before_contact", "impact", "deflection", "rebound", "reversal", "stuck")
-# The share of the held-out error above the floor a searched candidate must remove to be named
-# (DropProblem.share_needed), where it differs from min_improvement: set by the balanced rule of
-# benchmarks/share_calibration.py (the share mending the most campaigns less those it loses) on
-# the 400 drop_zoo campaigns of seeds 10300-10699, for the two candidates whose gain held on
-# both halves of them (10300-10499 and 10500-10699): cogging 0.65 (+6 / -2 first-order) and
-# backlash 0.70 (+3 / -0). A cogging the fit finds removes 0.5-0.7 of the error beside the
-# model's own error in the contact and friction laws, which the noise floor does not count.
-SHARE_NEEDED: dict[str, float] = {"cogging": 0.65, "backlash": 0.70}
 
 
 class _Set:
@@ -275,11 +267,6 @@ class DropProblem:
 
     def candidates(self) -> list[DropEffect]:
         return list(self._candidates)
-
-    def share_needed(self, effect: DropEffect) -> float:
-        """The share of the error above the floor ``effect`` must remove to be named
-        (``SHARE_NEEDED``; min_improvement for the others)."""
-        return SHARE_NEEDED.get(effect.name, self.min_improvement)
 
     def initial(self, effect: DropEffect) -> FloatArray:
         return effect.initial(self)
