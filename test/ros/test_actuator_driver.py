@@ -413,7 +413,11 @@ def test_several_motors_in_one_process(driver_factory: Any, protocol: str) -> No
     node, probe = driver_factory(protocol, **motors([1, 2, 3]))
     assert node.configured and len(node.cores) == 3
     assert wait_for(lambda: len(probe.states) > 20, 5.0)
-    assert list(probe.states[-1].name) == JOINTS
+    # one /joint_states with the motors that answered in the cycle: all three where every
+    # reply came in time; a motor whose reply missed its cycle (a busy computer) is left out
+    # of that message, never repeated stale or out of order (docs/actuator_driver.md)
+    assert wait_for(lambda: list(probe.states[-1].name) == JOINTS, 5.0)
+    assert all(list(m.name) == [j for j in JOINTS if j in m.name] and m.name for m in probe.states)
     targets = {"hip": 0.3, "knee": -0.2, "ankle": 0.1}
     probe.commands.publish(JointState(name=list(targets), position=list(targets.values())))
 
