@@ -27,7 +27,6 @@ def _loop(
     loop = Discoverer.__new__(Discoverer)
     loop.problem = SimpleNamespace(error=lambda *_a: np.full(1000, 2e-3))
     loop.min_improvement = 0.75
-    loop._given = None
     loop.progress = lambda _t: None
     loop._searched = {id(p) for p in searched}
 
