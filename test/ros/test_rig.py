@@ -66,8 +66,19 @@ def test_a_drop_trial_recorded_by_the_contract(tmp_path: Path) -> None:
     assert metrics.detected and metrics.estimate_source == "recorded /contact"
     # T from the shuttle velocity: m g h within the arm's resting offset (static friction)
     assert metrics.energy_j == pytest.approx(0.54 * 9.81 * 0.2, rel=0.1)
-    model = model_for("U10DD").solve([metrics.energy_j])
-    assert metrics.t_r_s == pytest.approx(float(model.t_r_s[0]), abs=0.003)
+    model_t_r = float(model_for("U10DD").solve([metrics.energy_j]).t_r_s[0])
+    # the model's t_r is for the driver's unbroken 1 kHz stream; the estimator sees samples
+    # only, so a stall of the simulated actuator's thread (a busy computer: measured gaps of
+    # 2-17 ms on a loaded 2-core machine) delays the onset by up to the stall beyond 1 ms
+    assert metrics.t_t_ns is not None and metrics.t_r_s is not None
+    t_e_ns = metrics.t_t_ns + round(metrics.t_r_s * 1e9)
+    first = max(int(np.searchsorted(states.stamp_ns, metrics.t_t_ns)) - 1, 0)
+    seen = states.stamp_ns[first : int(np.searchsorted(states.stamp_ns, t_e_ns, "right"))]
+    stall_s = max(float(np.diff(seen).max()) * 1e-9 - 0.001, 0.0) if len(seen) > 1 else 0.0
+    assert model_t_r - 0.003 <= metrics.t_r_s <= model_t_r + 0.003 + stall_s, (
+        f"t_r {metrics.t_r_s * 1e3:.2f} ms, model {model_t_r * 1e3:.2f} ms, "
+        f"stall before the onset {stall_s * 1e3:.2f} ms"
+    )
 
 
 @pytest.mark.parametrize("how", [signal.SIGTERM, signal.SIGINT])
