@@ -4,6 +4,7 @@ hidden physics is known (labels read only here, after the tool has run)."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -23,6 +24,7 @@ from transparency_ros.analysis.discrepancy.drop_effects import (
     MeasuredSaturation,
 )
 from transparency_ros.analysis.discrepancy.drop_library import drop_library
+from transparency_ros.analysis.discrepancy.drop_physics import STEP_S, DropSimulator
 from transparency_ros.analysis.discrepancy.drop_trials import rest_position
 from transparency_ros.bag.reader import find_bags
 from transparency_ros.core import strict_json
@@ -580,3 +582,42 @@ def test_a_lattice_coarser_than_the_models_error_is_named_after_the_search(
     named = {f.effect: f for f in report.findings}
     assert set(named) == {"payload_gravity", "quantization"}
     assert named["quantization"].parameters["step_rad"] == pytest.approx(step, rel=0.01)
+
+
+def test_the_simulations_shortcuts_change_no_value_a_trial_is_compared_on(tmp_path: Path) -> None:
+    """A row integrated for its own trial's length only, and a state at rest held instead of
+    stepped (drop_kernel.impact), give every value of the trial's window to the bit, whatever
+    the physics: rigid or sprung contact, bounces, backlash, a hub spring, cogging, clipping."""
+    out = write_drop_campaign(tmp_path / "c", 6, hidden=[], actuator="U10DD")
+    problem = _problem(out)
+    # trials recorded for several lengths (a rig's window per height): some rows end early
+    trials = []
+    for k, t in enumerate(problem.fit_trials[:3]):
+        end = t.start_s + (t.end_s - t.start_s) * (0.4 + 0.3 * k)
+        q, h = t.t_q <= end, t.t_h <= end
+        trials.append(replace(t, t_q=t.t_q[q], q=t.q[q], t_h=t.t_h[h], height=t.height[h],
+                              force=t.force[h]))  # fmt: skip
+    sim = DropSimulator(trials)
+    own = sim.own_steps.astype(int)
+    assert own.min() < own.max() == math.ceil(sim.duration / STEP_S) + 1
+    base = problem.physics([], [], trials)
+    variants = [
+        base,
+        replace(base, coulomb_nm=base.coulomb_nm * 8, static_nm=base.static_nm * 10),  # at rest
+        replace(base, restitution=0.6),
+        replace(base, restitution=0.5, stiffness_n_per_m=3e5),
+        replace(base, backlash_rad=0.01, backlash_start=1.0),
+        replace(base, torsion_nm_per_rad=3000.0, torsion_damping_ratio=0.05),
+        replace(base, cogging_nm=0.03, cogging_periods=40.0, cogging_phase_rad=0.3),
+        replace(base, torque_limit_nm=0.2, torque_offset_nm=0.02),
+    ]
+    at_rest = 0
+    for ph in variants:
+        _, q_full, y_full = sim.run(ph, shortcuts=False)
+        _, q, y = sim.run(ph)
+        for i, n in enumerate(own):
+            assert np.array_equal(q[i, :n], q_full[i, :n]), (ph, i)
+            assert np.array_equal(y[i, :n], y_full[i, :n]), (ph, i)
+            # (a trial that ends at rest: the fixed point was taken for it)
+            at_rest += bool(np.all(q_full[i, n - 50 : n] == q_full[i, n - 1]))
+    assert at_rest > 0

@@ -71,6 +71,7 @@ COLUMNS = (
     "torsion_damping",  # its damper [N m s/rad]
     "backlash_start",  # the arm's start in the dead band, arm - motor in half bands (+1: the
     # far flank from the strike, the whole band to close; -1: on the flank the strike loads)
+    "steps",  # output steps this row needs (its own trial's length; 0: all, no shortcuts)
 )
 (
     MASS,
@@ -102,6 +103,7 @@ COLUMNS = (
     TORSION,
     TORSION_DAMPING,
     BACKLASH_START,
+    ROW_STEPS,
 ) = range(len(COLUMNS))
 
 
@@ -172,6 +174,15 @@ def drive_torque(row: Any, q: float, w: float, dt: float) -> float:
     return float(torque)
 
 
+@jit
+def same_bits(a: Any, b: Any) -> bool:
+    """Whether two states are the same to the bit (a -0.0 is not a 0.0; a NaN is never)."""
+    for j in range(a.shape[0]):
+        if a[j] != b[j] or math.copysign(1.0, a[j]) != math.copysign(1.0, b[j]):
+            return False
+    return True
+
+
 # the state of one row, stepped in place: motor and arm (load side) angle and speed, shuttle
 # height and speed, whether the shuttle rides on the arm and whether the gearbox is engaged
 QM, WM, QL, WL, Y, V, GLUED, ENGAGED = range(8)
@@ -180,10 +191,19 @@ QM, WM, QL, WL, Y, V, GLUED, ENGAGED = range(8)
 @parallel_jit
 def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
     """Fill ``out_q`` (motor position) and ``out_y`` (shuttle height), (rows, steps), for the
-    physics ``p`` (rows, COLUMNS). Rows are independent: they run on all cores."""
+    physics ``p`` (rows, COLUMNS). Rows are independent: they run on all cores.
+
+    Two shortcuts give what stepping on would, to the bit: a row is integrated for its own
+    ``steps`` only (a trial shorter than the longest of its run), and a state that one whole
+    output step left exactly as it was (everything at rest: the arm held by friction, the
+    shuttle on it or gone) stays so, each step being a function of the state alone.
+    A row whose ``steps`` column is 0 is integrated to ``steps`` (the tests compare the two)."""
     for i in numba.prange(out_q.shape[0]):
         row = p[i]
         s = np.empty(8)
+        before = np.empty(8)
+        shortcuts = row[ROW_STEPS] > 0
+        own = min(steps, int(row[ROW_STEPS])) if shortcuts else steps
         # with backlash the arm starts anywhere in the dead band: free until the gap closes;
         # a torsional spring joins them always (never one body)
         rigid = 1.0 if row[BACKLASH] == 0.0 and row[TORSION] == 0.0 else 0.0
@@ -193,9 +213,12 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
         s[QM], s[WM], s[QL], s[WL] = row[Q0], 0.0, arm0, 0.0
         s[Y], s[V], s[GLUED], s[ENGAGED] = row[Y0] + lift, row[V0], 0.0, rigid
         spring = math.isfinite(row[STIFFNESS])
-        for k in range(steps):
+        k = 0
+        while k < own:
             out_q[i, k] = s[QM]
             out_y[i, k] = s[Y] - lift
+            k += 1
+            before[:] = s
             n_sub = int(row[SUBSTEPS])
             if spring:
                 # the spring's finer steps while in contact, or about to be within this step
@@ -228,6 +251,11 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
                     # the motor's and the arm's mean acceleration over the step
                     acc = ((s[WM] - w_start[0]) / h, (s[WL] - w_start[1]) / h)
                     strikes(row, s, (acc_y, *acc), h)
+            if shortcuts and same_bits(s, before):  # a fixed point: every later step the same
+                break
+        # the steps not integrated: the state they would have shown
+        out_q[i, k:] = s[QM]
+        out_y[i, k:] = s[Y] - lift
 
 
 @jit

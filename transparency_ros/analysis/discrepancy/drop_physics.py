@@ -144,12 +144,19 @@ class DropSimulator:
         self.tip0 = self.arm * np.sin(self.q0)
         y0, v0 = zip(*(shuttle_state(t) for t in trials), strict=True)
         self.y0, self.v0 = np.array(y0) + self.tip0, np.array(v0)
-        self.duration = max(t.end_s - t.start_s for t in trials) + 0.03
+        lengths = np.array([t.end_s - t.start_s for t in trials]) + 0.03
+        self.duration = float(lengths.max()) if trials else 0.03
+        # each trial's own output steps (a shorter trial is not integrated to the longest's end)
+        self.own_steps = np.ceil(lengths / STEP_S) + 1
 
-    def run(self, ph: DropPhysics, tiles: int = 1) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def run(
+        self, ph: DropPhysics, tiles: int = 1, shortcuts: bool = True
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(time from each trial's start, motor position, shuttle height above the tip at
         rest), (rows, steps): the
-        trials ``tiles`` times over, row ``j * n_trials + i`` with physics row alike."""
+        trials ``tiles`` times over, row ``j * n_trials + i`` with physics row alike. With
+        ``shortcuts`` (the same values to the bit where a trial is compared, see
+        :func:`impact`) a trial's row past its own end holds its last value."""
         n = len(self.trials) * tiles
         ph = ph.rows(n)
         steps = math.ceil(self.duration / STEP_S) + 1
@@ -210,6 +217,7 @@ class DropSimulator:
             torsion,
             torsion_damping,
             ph.backlash_start,
+            np.tile(self.own_steps if shortcuts else 0.0 * self.own_steps, tiles),
         ]
         out_q = np.empty((n, steps))
         out_y = np.empty((n, steps))
