@@ -175,17 +175,30 @@ def drive_torque(row: Any, q: float, w: float, dt: float) -> float:
 
 
 @jit
-def same_bits(a: Any, b: Any) -> bool:
-    """Whether two states are the same to the bit (a -0.0 is not a 0.0; a NaN is never)."""
-    for j in range(a.shape[0]):
+def same_bits(a: Any, b: Any, n: int) -> bool:
+    """Whether the first ``n`` values of two states are the same to the bit (a -0.0 is not a
+    0.0; a NaN is never)."""
+    for j in range(n):
         if a[j] != b[j] or math.copysign(1.0, a[j]) != math.copysign(1.0, b[j]):
             return False
     return True
 
 
 # the state of one row, stepped in place: motor and arm (load side) angle and speed, shuttle
-# height and speed, whether the shuttle rides on the arm and whether the gearbox is engaged
-QM, WM, QL, WL, Y, V, GLUED, ENGAGED = range(8)
+# height and speed, whether the shuttle rides on the arm and whether the gearbox is engaged;
+# then the arm angle of the last sine and cosine taken and the two (not state: a cache)
+QM, WM, QL, WL, Y, V, GLUED, ENGAGED, TRIG_AT, SIN, COS = range(11)
+STATE = 8
+
+
+@jit
+def arm_sin_cos(s: Any) -> tuple[float, float]:
+    """sin and cos of the arm's angle, taken again only where it moved (the same values, to
+    the bit: an arm at rest, and an angle asked for by several pieces of one step)."""
+    q = s[QL]
+    if q != s[TRIG_AT] or math.copysign(1.0, q) != math.copysign(1.0, s[TRIG_AT]):
+        s[TRIG_AT], s[SIN], s[COS] = q, math.sin(q), math.cos(q)
+    return s[SIN], s[COS]
 
 
 @parallel_jit
@@ -200,8 +213,8 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
     A row whose ``steps`` column is 0 is integrated to ``steps`` (the tests compare the two)."""
     for i in numba.prange(out_q.shape[0]):
         row = p[i]
-        s = np.empty(8)
-        before = np.empty(8)
+        s = np.empty(COS + 1)
+        before = np.empty(COS + 1)
         shortcuts = row[ROW_STEPS] > 0
         own = min(steps, int(row[ROW_STEPS])) if shortcuts else steps
         # with backlash the arm starts anywhere in the dead band: free until the gap closes;
@@ -212,6 +225,7 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
         lift = row[ARM] * (math.sin(arm0) - math.sin(row[Q0]))
         s[QM], s[WM], s[QL], s[WL] = row[Q0], 0.0, arm0, 0.0
         s[Y], s[V], s[GLUED], s[ENGAGED] = row[Y0] + lift, row[V0], 0.0, rigid
+        s[TRIG_AT], s[SIN], s[COS] = math.nan, math.nan, math.nan
         spring = math.isfinite(row[STIFFNESS])
         k = 0
         while k < own:
@@ -222,8 +236,9 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
             n_sub = int(row[SUBSTEPS])
             if spring:
                 # the spring's finer steps while in contact, or about to be within this step
-                gap = s[Y] - row[ARM] * math.sin(s[QL])
-                closing = row[ARM] * math.cos(s[QL]) * s[WL] - s[V]
+                sin, cos = arm_sin_cos(s)
+                gap = s[Y] - row[ARM] * sin
+                closing = row[ARM] * cos * s[WL] - s[V]
                 if gap < 2 * dt * max(closing, 0.0) + CONTACT_MARGIN_M:
                     n_sub = int(row[CONTACT_SUBSTEPS])
             h = dt / n_sub
@@ -236,8 +251,9 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
                 # the shuttle
                 if s[GLUED]:
                     v_start = s[V]
-                    s[Y] = row[ARM] * math.sin(s[QL])
-                    s[V] = row[ARM] * math.cos(s[QL]) * s[WL]
+                    sin, cos = arm_sin_cos(s)
+                    s[Y] = row[ARM] * sin
+                    s[V] = row[ARM] * cos * s[WL]
                     # the arm can only push: where it had to pull the shuttle down (a motor
                     # running ahead in a dead band), the shuttle flies free from here
                     if row[TORSION] == 0.0:  # (on a spring: decided before the step)
@@ -251,7 +267,7 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
                     # the motor's and the arm's mean acceleration over the step
                     acc = ((s[WM] - w_start[0]) / h, (s[WL] - w_start[1]) / h)
                     strikes(row, s, (acc_y, *acc), h)
-            if shortcuts and same_bits(s, before):  # a fixed point: every later step the same
+            if shortcuts and same_bits(s, before, STATE):  # a fixed point: all later steps alike
                 break
         # the steps not integrated: the state they would have shown
         out_q[i, k:] = s[QM]
@@ -271,7 +287,8 @@ def leaves(row: Any, s: Any) -> bool:
     that the step is taken without the shuttle's inertia (after it, the separation's error
     grew with the step: first order, one per ring of the spring)."""
     arm = -spring_torque(row, s[QL], s[QM], s[WL], s[WM]) / row[ARM_INERTIA]
-    tip = row[ARM] * (math.cos(s[QL]) * arm - math.sin(s[QL]) * s[WL] * s[WL])
+    sin, cos = arm_sin_cos(s)
+    tip = row[ARM] * (cos * arm - sin * s[WL] * s[WL])
     return bool(tip < -GRAVITY - row[RAIL] * sign(s[V]) / row[MASS])
 
 
@@ -279,12 +296,12 @@ def leaves(row: Any, s: Any) -> bool:
 def forces(row: Any, s: Any, dt: float) -> tuple[float, float, float]:
     """(motor drive, load on the arm, shuttle acceleration) at the step's start."""
     m, r, weight = row[MASS], row[ARM], row[WEIGHT]
-    cos = math.cos(s[QL])
+    sin, cos = arm_sin_cos(s)
     drive = drive_torque(row, s[QM], s[WM], dt)
     load, acc_y = 0.0, -GRAVITY
     if math.isfinite(row[STIFFNESS]):
         closing = r * cos * s[WL] - s[V]
-        pen = r * math.sin(s[QL]) - s[Y] + 0.5 * dt * closing  # at the step's midpoint
+        pen = r * sin - s[Y] + 0.5 * dt * closing  # at the step's midpoint
         if pen > 0.0:
             # the shuttle's weight (m g = m_s g r / r) reaches the arm through the spring only
             force = max(0.0, row[STIFFNESS] * pen + row[DAMPING] * closing)
@@ -295,7 +312,7 @@ def forces(row: Any, s: Any, dt: float) -> tuple[float, float, float]:
     if s[GLUED]:
         # the shuttle rides the tip on its vertical rail (y = r sin q): its share of the inertia
         # is m r^2 cos^2 q (joint_step) and it adds m r^2 cos q sin q q'^2 (exact at any angle)
-        load += m * r * r * cos * math.sin(s[QL]) * s[WL] * s[WL]
+        load += m * r * r * cos * sin * s[WL] * s[WL]
     # rail friction against the shuttle's motion; a glued shuttle passes it to the arm
     rail = row[RAIL] * sign(s[V])
     if s[GLUED]:
@@ -310,7 +327,7 @@ def joint_step(row: Any, s: Any, drive: float, load: float, dt: float) -> None:
     torsional spring always each on its own, joined by the spring."""
     fr = (row[VISCOUS], row[COULOMB], row[STATIC])
     j_r = row[ROTOR]
-    riding = row[MASS] * (row[ARM] * math.cos(s[QL])) ** 2 if s[GLUED] else 0.0
+    riding = row[MASS] * (row[ARM] * arm_sin_cos(s)[1]) ** 2 if s[GLUED] else 0.0
     j_load = row[ARM_INERTIA] + riding  # m_s r^2 cos^2 q while the shuttle rides the tip
     if row[TORSION] > 0.0:
         # two bodies on a spring: the motor (friction, drive, encoder) and the arm
@@ -374,7 +391,8 @@ def strikes(row: Any, s: Any, acc: tuple[float, float, float], dt: float) -> Non
     acc_y, acc_m, acc_l = acc
     window = dt
     for _ in range(MAX_STRIKES):
-        tip_y, tip_v = r * math.sin(s[QL]), r * math.cos(s[QL]) * s[WL]
+        sin, cos = arm_sin_cos(s)
+        tip_y, tip_v = r * sin, r * cos * s[WL]
         if s[GLUED] or s[Y] > tip_y or s[V] - tip_v >= 0.0:
             return
         # they met tau before the end of the step, no earlier than the strike before
