@@ -217,6 +217,10 @@ def test_services_and_bad_commands(driver_factory: Any) -> None:
     probe.commands.publish(JointState(name=["elbow"], position=[0.1]))
     probe.commands.publish(JointState(name=["joint", "x"], position=[0.1]))
     assert wait_for(lambda: node.core.status.commands_rejected == rejected_before + 3)
+    # bytes that are no JointState (the commands are taken raw, on a thread of their own)
+    probe.commands.publish(b"\x00\x01\x00\x00\x07")
+    assert wait_for(lambda: node.core.status.commands_rejected == rejected_before + 4)
+    assert "undecodable" in node.core.status.last_rejection
     count = len(probe.states)
     assert wait_for(lambda: len(probe.states) > count + 20)
     # disable: zero torque and motor mode off; never driven again, still polled and published

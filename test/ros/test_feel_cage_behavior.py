@@ -88,3 +88,37 @@ def test_sweep_contact_act_caged(ros_context: Context) -> None:
         spinner.stop()
         behavior.destroy_node()
         probe.destroy_node()
+
+
+def test_undecodable_messages_are_skipped(ros_context: Context) -> None:
+    """/joint_states and /contact arrive as raw bytes (a thread of their own): bytes that are
+    no message of the type are skipped, and the node goes on with the next good one."""
+    behavior = FeelCageBehaviorNode(context=ros_context)
+    probe = Node("behavior_probe", context=ros_context)
+    phases: list[str] = []
+    latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    probe.create_subscription(String, "/feel_cage/phase", lambda m: phases.append(m.data), latched)
+    states = probe.create_publisher(JointState, "/joint_states", 10)
+    contacts = probe.create_publisher(WrenchStamped, "/contact", 10)
+    spinner = Spinner(ros_context, behavior, probe)
+    try:
+        assert wait_for(
+            lambda: states.get_subscription_count() > 0 and contacts.get_subscription_count() > 0
+        )
+        states.publish(b"\x00\x01\x00\x00\x07")
+        states.publish(JointState(name=["joint"], position=[0.3]))
+        assert wait_for(lambda: behavior.position == pytest.approx(0.3))
+        assert call(probe, Trigger, "/feel_cage_behavior/start", Trigger.Request()).success
+        assert call(probe, SetBool, "/feel_cage_behavior/arm", SetBool.Request(data=True)).success
+        contacts.publish(b"\x00\x01\x00\x00\x07")
+        assert not wait_for(lambda: phases[-1:] == ["process"], 0.3)
+        contact = WrenchStamped()
+        contact.header.frame_id = "joint"
+        contact.header.stamp = behavior.get_clock().now().to_msg()
+        contacts.publish(contact)
+        assert wait_for(lambda: "process" in phases)
+        assert behavior.hot_path.handler_errors == 0  # skipped on purpose, not crashed into
+    finally:
+        spinner.stop()
+        behavior.destroy_node()
+        probe.destroy_node()

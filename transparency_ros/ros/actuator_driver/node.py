@@ -37,6 +37,7 @@ from transparency_ros.canbus.protocol import (
 )
 from transparency_ros.canbus.sim_device import SimulatedActuator
 from transparency_ros.canbus.sim_robot import SimulatedBus, SimulatedBuses
+from transparency_ros.core.cdr import CdrError, JointStateFields, JointStateReader
 from transparency_ros.core.driver import (
     CommandRejectedError,
     DriverCore,
@@ -70,7 +71,7 @@ from transparency_ros.ros.actuator_driver.parameters import (
     exit_logger,
     settings_value,
 )
-from transparency_ros.ros.conversions import stamp_to_s
+from transparency_ros.ros.hot_path import HotPath
 from transparency_ros.ros.params import choice_error, destroyed_if_refused
 from transparency_ros.ros.sim_ball import SimBallInterface
 from transparency_ros.ros.sim_rig import SimRigInterface
@@ -107,6 +108,7 @@ class ActuatorDriverNode(LifecycleNode):
         self._joint_pub: Any = None
         self._setpoint_pub: Any = None
         self._command_sub: Any = None
+        self._hot_path: HotPath | None = None  # serves /joint_commands while configured
         self._safe_lock = threading.Lock()
         # time.monotonic() -> this node's ROS time, measured robustly (canbus/clock.py)
         self._to_ros = ClockOffset(lambda: self.get_clock().now().nanoseconds * 1e-9)
@@ -282,9 +284,15 @@ class ActuatorDriverNode(LifecycleNode):
         self._joint_pub = self.create_lifecycle_publisher(JointState, "/joint_states", 10)
         if self.values["publish_setpoints"]:
             self._setpoint_pub = self.create_lifecycle_publisher(JointState, "/joint_setpoints", 10)
-        self._command_sub = self.create_subscription(
-            JointState, "/joint_commands", self._on_command, 10
+        # commands on a thread of their own, as raw bytes: through the executor, a torque
+        # command took a median 5.6 ms (max 13.5) from the sender's stamp to the hardware loop
+        # with three 1 kHz nodes on two cores, and 1.8 ms (max 3.1) this way (feel-cage cell)
+        self._hot_path = HotPath(self)
+        reader = JointStateReader()
+        self._command_sub = self._hot_path.subscribe(
+            JointState, "/joint_commands", 10, lambda data: self._on_command_bytes(reader, data)
         )
+        self._hot_path.start()
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         for p in params:
@@ -386,7 +394,9 @@ class ActuatorDriverNode(LifecycleNode):
 
     def _close(self) -> None:
         self._stop_and_disable()
-        if self._command_sub is not None:
+        if self._hot_path is not None and self._hot_path.stop():
+            self._hot_path = None
+        if self._command_sub is not None and self._hot_path is None:
             self.destroy_subscription(self._command_sub)
             self._command_sub = None
         for pub in (self._joint_pub, self._setpoint_pub):
@@ -422,6 +432,9 @@ class ActuatorDriverNode(LifecycleNode):
 
     def destroy_node(self) -> None:
         self.gc_pauses.stop()
+        if self._hot_path is not None and not self._hot_path.stop():
+            exit_logger().error("command thread still running: node left undestroyed")
+            return
         super().destroy_node()
 
     # ----------------------------------------------------------------- data path
@@ -461,7 +474,7 @@ class ActuatorDriverNode(LifecycleNode):
             stamp_s = self._ros_seconds_at(sample.stamp_s)
             self._publish_states(stamp_s, names, sample.feedback, sample.commands)
 
-    def _on_motors_command(self, msg: JointState, now: float) -> None:
+    def _on_motors_command(self, msg: JointStateFields, now: float) -> None:
         """A command for several motors: by name, all or nothing (one bad joint rejects the
         message); joints of other drivers are ignored, motors not named keep their target."""
         loop = self.loop
@@ -489,9 +502,25 @@ class ActuatorDriverNode(LifecycleNode):
         if any(clamped):
             self._warn_throttled("command clamped to the configured limits")
 
-    def _on_command(self, msg: JointState) -> None:
+    def _on_command_bytes(self, reader: JointStateReader, data: bytes) -> None:
+        try:
+            msg = reader(data)
+        except CdrError as err:
+            reason = f"undecodable message: {err}"
+            loop = self.loop
+            with self._core_lock():
+                if isinstance(loop, MultiControlLoop):
+                    for motor in loop.motors:
+                        motor.core.reject(reason)
+                else:
+                    self.core.reject(reason)
+            self._warn_throttled(f"rejected /joint_commands: {reason}")
+            return
+        self._on_command(msg)
+
+    def _on_command(self, msg: JointStateFields) -> None:
         now = time.monotonic()
-        stamp = stamp_to_s(msg.header.stamp)
+        stamp = msg.stamp_ns * 1e-9
         if stamp > 0:
             # a stamped command holds from its stamp on (streamed trajectories are extrapolated
             # from there, so transport latency does not make the joint lag)
