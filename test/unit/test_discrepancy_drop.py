@@ -584,6 +584,31 @@ def test_a_lattice_coarser_than_the_models_error_is_named_after_the_search(
     assert named["quantization"].parameters["step_rad"] == pytest.approx(step, rel=0.01)
 
 
+def test_a_band_narrower_than_one_encoder_count_names_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On a 512-count encoder (12.3 mrad) the motor's lost motion in a narrower band moves the
+    readings by less than the lattice already does: neither backlash candidate counts such a
+    band as meaningful, whatever the noise floor (zoo_10877 named a 4.9 mrad band where a
+    drift and the lattice were hidden). A band of a few counts still is."""
+    from transparency_ros.synth import drop_campaign  # noqa: PLC0415
+
+    step = 2 * np.pi / 512
+    monkeypatch.setitem(drop_campaign._SAMPLERS, "quantization", lambda r, m, a: {"step_rad": step})
+    out = write_drop_campaign(
+        tmp_path / "c", 3, hidden=["payload_gravity", "quantization"], actuator="U10DD"
+    )
+    problem = _problem(out)
+    assert problem.encoder_count == pytest.approx(step, rel=1e-6)
+    assert problem.noise_floor() < 0.5 * step
+    bands = [c for c in problem.candidates() if c.name == "backlash"]
+    assert len(bands) == 2
+    for band in bands:
+        start = [0.0] if band.start is None else []
+        assert not band.meaningful(np.array([0.8 * step, *start]))
+        assert band.meaningful(np.array([3.0 * step, *start]))
+
+
 def test_the_simulations_shortcuts_change_no_value_a_trial_is_compared_on(tmp_path: Path) -> None:
     """A row integrated for its own trial's length only, and a state at rest held instead of
     stepped (drop_kernel.impact), give every value of the trial's window to the bit, whatever

@@ -217,6 +217,7 @@ class DropProblem:
                 float(np.mean([t.loaded_inertia_kgm2 for t in trials])),
                 float(np.median(np.concatenate([np.diff(t.t_q) for t in trials]))),
                 noise_floor_rad=self.noise_floor(),
+                encoder_count_rad=self.encoder_count,
                 torques_recorded=all(t.effort is not None for t in trials),
                 clip=drive_clip(trials),
                 bounces=shuttle_bounces(trials),

@@ -187,10 +187,16 @@ class DropBacklash(DropEffect):
     (``steps.choose``).
 
     A band narrower than ``least_rad`` (the RMS position error sensor noise alone gives: the
-    problem's noise floor) names nothing: the arm's free travel in it is not told from the
-    readings' noise. On the zoo's development campaigns 10000-10199 the bands named where
-    none was hidden were 0.4-0.9 of the floor wide (0.0002-0.0009 rad), and the hidden ones
-    were fitted 3.8-74 times as wide as it (0.0035-0.022 rad)."""
+    problem's noise floor, or one count of the encoder where that is larger) names nothing:
+    the arm's free travel in it is not told from the readings' noise, nor from the encoder's
+    steps (the motor's lost motion moves the readings by less than the count that the
+    encoder's lattice already moves them by). On the zoo's development campaigns 10000-10199
+    the bands named where none was hidden were 0.4-0.9 of the floor wide (0.0002-0.0009
+    rad), and the hidden ones were fitted 3.8-74 times as wide as it (0.0035-0.022 rad). On
+    the fresh seeds 10800-10899, two of the four bands named where none was hidden were 0.4
+    and 0.8 of a count wide (1.3 and 10 times the floor: zoo_10893, effect-free, and
+    zoo_10877, a 512-count encoder); the 31 hidden bands of 10700-10899 were 8-250 counts
+    wide."""
 
     def __init__(self, start: float | None = None, least_rad: float = 0.0) -> None:
         self.start = start

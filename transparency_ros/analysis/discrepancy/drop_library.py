@@ -32,6 +32,7 @@ def drop_library(
     sample_interval_s: float,
     *,
     noise_floor_rad: float = 0.0,
+    encoder_count_rad: float = 0.0,
     torques_recorded: bool = False,
     clip: DriveClip | None = None,
     bounces: Bounces | None = None,
@@ -39,7 +40,8 @@ def drop_library(
     """The candidates (``loaded_inertia_kgm2``: the arm's with the shuttle on it, J_a + m r^2,
     for the frequency a torsional compliance is reported at; ``sample_interval_s``: between
     the encoder's readings; ``noise_floor_rad``: the RMS position error sensor noise alone
-    gives, the narrowest backlash named). A drive's limit is read off its recorded torque
+    gives, and ``encoder_count_rad``: one count of the encoder, the larger of them the
+    narrowest backlash named). A drive's limit is read off its recorded torque
     where it shows one (``clip``); where every trial recorded the drive's torque and none
     shows a clip, no limit is searched for (the torque would show it); where torques are
     missing, it is fitted. A rebound is named where the load cell shows one (``bounces``),
@@ -61,6 +63,7 @@ def drop_library(
         saturation = [
             SetPhysics("torque_saturation", "limit_nm", 0.02, 3.0, "torque_limit_nm", null=None)
         ]
+    least_band = max(noise_floor_rad, encoder_count_rad)
     return [
         DropDrift(),
         DropOffset(coulomb_nm),
@@ -70,8 +73,8 @@ def drop_library(
         ImpactSpeedLoss(shuttle_mass_kg),
         StructuralCompliance(),
         hub,
-        DropBacklash(least_rad=noise_floor_rad),
-        DropBacklash(start=1.0, least_rad=noise_floor_rad),
+        DropBacklash(least_rad=least_band),
+        DropBacklash(start=1.0, least_rad=least_band),
         SensorDelay(sample_interval_s),
         DropQuantization(),
         *saturation,
