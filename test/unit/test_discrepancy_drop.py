@@ -609,6 +609,11 @@ def test_a_band_narrower_than_one_encoder_count_names_nothing(
         assert band.meaningful(np.array([3.0 * step, *start]))
 
 
+def test_a_simulator_without_trials_is_refused() -> None:
+    with pytest.raises(ValueError, match="no trials"):
+        DropSimulator([])
+
+
 def test_the_simulations_shortcuts_change_no_value_a_trial_is_compared_on(tmp_path: Path) -> None:
     """A row integrated for its own trial's length only, and a state at rest held instead of
     stepped (drop_kernel.impact), give every value of the trial's window to the bit, whatever

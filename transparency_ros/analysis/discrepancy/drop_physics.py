@@ -131,6 +131,8 @@ class DropSimulator:
     """The impact pieces of a set of trials, integrated together."""
 
     def __init__(self, trials: Sequence[DropTrial]) -> None:
+        if not trials:
+            raise ValueError("DropSimulator: no trials to simulate")
         self.trials = list(trials)
         self.mass = np.array([t.mass_kg for t in trials])
         self.arm = np.array([t.arm_m for t in trials])
@@ -145,7 +147,7 @@ class DropSimulator:
         y0, v0 = zip(*(shuttle_state(t) for t in trials), strict=True)
         self.y0, self.v0 = np.array(y0) + self.tip0, np.array(v0)
         lengths = np.array([t.end_s - t.start_s for t in trials]) + 0.03
-        self.duration = float(lengths.max()) if trials else 0.03
+        self.duration = float(lengths.max())
         # each trial's own output steps (a shorter trial is not integrated to the longest's end)
         self.own_steps = np.ceil(lengths / STEP_S) + 1
 
@@ -217,7 +219,7 @@ class DropSimulator:
             torsion,
             torsion_damping,
             ph.backlash_start,
-            np.tile(self.own_steps if shortcuts else 0.0 * self.own_steps, tiles),
+            np.tile(self.own_steps if shortcuts else np.zeros_like(self.own_steps), tiles),
         ]
         out_q = np.empty((n, steps))
         out_y = np.empty((n, steps))
