@@ -32,7 +32,6 @@ is added to. ``self.lock`` guards the pipeline between the two.
 
 from __future__ import annotations
 
-import math
 import sys
 import threading
 import time
@@ -92,6 +91,7 @@ from transparency_ros.ros.params import (
     destroyed_if_refused,
     run_node,
 )
+from transparency_ros.ros.throttle import ThrottledWarning
 
 GAP_NOTED_RAD = 1e-3  # a setpoint/command difference the diagnostics message mentions
 
@@ -165,7 +165,7 @@ class ContactEstimatorNode(Node):
         # every estimate and every onset
         self.sample_age = DurationHistogram()
         self.onset_age = DurationHistogram()
-        self._last_warn_s = -math.inf
+        self._warn = ThrottledWarning(self.get_logger())
         self._readers = {t: JointStateReader() for t in ("/joint_states", "/joint_setpoints")}
         self.hot_path = HotPath(self, priority=self.values["hot_path_priority"])
         self._leave_in_process: list[Any] = []
@@ -225,12 +225,6 @@ class ContactEstimatorNode(Node):
             self.pipeline.default_theta_d_rad = self.values["theta_d_rad"]
 
     # ----------------------------------------------------------------- data
-
-    def _warn(self, text: str) -> None:
-        now = time.monotonic()
-        if now - self._last_warn_s >= 1.0:
-            self._last_warn_s = now
-            self.get_logger().warning(text)
 
     def _on_description(self, msg: String) -> None:
         """A URDF on /robot_description: the observer is (re)built from it. A URDF that does

@@ -28,7 +28,6 @@ from __future__ import annotations
 import math
 import sys
 import threading
-import time
 from dataclasses import replace
 from functools import cache
 from typing import Any
@@ -56,6 +55,7 @@ from transparency_ros.ros.params import (
     destroyed_if_refused,
     run_node,
 )
+from transparency_ros.ros.throttle import ThrottledWarning
 
 NODE_NAME = "feel_cage_behavior"
 P = ParamSpec
@@ -164,7 +164,7 @@ class FeelCageBehaviorNode(Node):
         self._trial_pub = self.create_publisher(DiagnosticStatus, "/feel_cage/trial", LATCHED)
         self.lock = threading.Lock()  # the state, between the hot path and the executor
         self._reader = JointStateReader()
-        self._last_warn_s = -math.inf
+        self._warn = ThrottledWarning(self.get_logger())
         self.hot_path = HotPath(self)
         self.hot_path.subscribe(JointState, "/joint_states", 10, self._on_state_bytes)
         self.hot_path.subscribe(WrenchStamped, "/contact", 10, self._on_contact_bytes)
@@ -183,12 +183,6 @@ class FeelCageBehaviorNode(Node):
     def _on_timer(self) -> None:
         with self.lock:
             self._step()
-
-    def _warn(self, text: str) -> None:
-        now = time.monotonic()
-        if now - self._last_warn_s >= 1.0:
-            self._last_warn_s = now
-            self.get_logger().warning(text)
 
     def _on_state_bytes(self, data: bytes) -> None:
         try:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import atexit
 import contextlib
-import math
 import sys
 import threading
 import time
@@ -37,17 +36,16 @@ from transparency_ros.canbus.protocol import (
 )
 from transparency_ros.canbus.sim_device import SimulatedActuator
 from transparency_ros.canbus.sim_robot import SimulatedBus, SimulatedBuses
-from transparency_ros.core.cdr import CdrError, JointStateFields, JointStateReader
+from transparency_ros.core.cdr import JointStateReader
 from transparency_ros.core.driver import (
-    CommandRejectedError,
     DriverCore,
     DriverSettings,
     SettingsError,
-    parse_joint_command,
 )
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.gc_pauses import GcPauses
 from transparency_ros.ros import in_process
+from transparency_ros.ros.actuator_driver.commands import CommandInput
 from transparency_ros.ros.actuator_driver.diagnostics import (
     driver_status,
     gc_values,
@@ -75,10 +73,11 @@ from transparency_ros.ros.hot_path import HotPath
 from transparency_ros.ros.params import choice_error, destroyed_if_refused
 from transparency_ros.ros.sim_ball import SimBallInterface
 from transparency_ros.ros.sim_rig import SimRigInterface
+from transparency_ros.ros.throttle import ThrottledWarning
 
 
 @destroyed_if_refused
-class ActuatorDriverNode(LifecycleNode):
+class ActuatorDriverNode(CommandInput, LifecycleNode):
     """One CAN actuator as a lifecycle node: parameters (``parameters``), what it talks to
     (``hardware``), the ROS-free loop (``canbus.loop.ControlLoop``) fed with targets from
     /joint_commands and publishing /joint_states from its own thread, services, diagnostics
@@ -112,7 +111,7 @@ class ActuatorDriverNode(LifecycleNode):
         self._safe_lock = threading.Lock()
         # time.monotonic() -> this node's ROS time, measured robustly (canbus/clock.py)
         self._to_ros = ClockOffset(lambda: self.get_clock().now().nanoseconds * 1e-9)
-        self._last_warn_s = -math.inf
+        self._warn_throttled = ThrottledWarning(self.get_logger())
         self._fault_reported = ""
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -473,85 +472,6 @@ class ActuatorDriverNode(LifecycleNode):
             names = [loop.motors[i].name for i in sample.indices]
             stamp_s = self._ros_seconds_at(sample.stamp_s)
             self._publish_states(stamp_s, names, sample.feedback, sample.commands)
-
-    def _on_motors_command(self, msg: JointStateFields, now: float) -> None:
-        """A command for several motors: by name, all or nothing (one bad joint rejects the
-        message); joints of other drivers are ignored, motors not named keep their target."""
-        loop = self.loop
-        assert isinstance(loop, MultiControlLoop)
-        named = [m for m in loop.motors if m.name in msg.name]
-        try:
-            if not msg.name:
-                raise CommandRejectedError("commands for several motors need joint names")
-            if not named:
-                raise CommandRejectedError(
-                    f"none of {[m.name for m in loop.motors]} in command names {list(msg.name)}"
-                )
-            targets = [
-                parse_joint_command(m.name, msg.name, msg.position, msg.velocity, msg.effort)
-                for m in named
-            ]
-        except CommandRejectedError as err:
-            with loop.lock:
-                for motor in named or loop.motors:
-                    motor.core.reject(str(err))
-            self._warn_throttled(f"rejected /joint_commands: {err}")
-            return
-        with loop.lock:
-            clamped = [m.core.set_target(t, now) for m, t in zip(named, targets, strict=True)]
-        if any(clamped):
-            self._warn_throttled("command clamped to the configured limits")
-
-    def _on_command_bytes(self, reader: JointStateReader, data: bytes) -> None:
-        try:
-            msg = reader(data)
-        except CdrError as err:
-            reason = f"undecodable message: {err}"
-            loop = self.loop
-            with self._core_lock():
-                if isinstance(loop, MultiControlLoop):
-                    for motor in loop.motors:
-                        motor.core.reject(reason)
-                else:
-                    self.core.reject(reason)
-            self._warn_throttled(f"rejected /joint_commands: {reason}")
-            return
-        self._on_command(msg)
-
-    def _on_command(self, msg: JointStateFields) -> None:
-        now = time.monotonic()
-        stamp = msg.stamp_ns * 1e-9
-        if stamp > 0:
-            # a stamped command holds from its stamp on (streamed trajectories are extrapolated
-            # from there, so transport latency does not make the joint lag)
-            age = now - self._to_ros.back(stamp)
-            if 0.0 <= age < 1.0:
-                now -= age
-        if isinstance(self.loop, MultiControlLoop):
-            self._on_motors_command(msg, now)
-            return
-        try:
-            target = parse_joint_command(
-                self.values["joint_name"], msg.name, msg.position, msg.velocity, msg.effort
-            )
-        except CommandRejectedError as err:
-            with self._core_lock():
-                self.core.reject(str(err))
-            self._warn_throttled(f"rejected /joint_commands: {err}")
-            return
-        with self._core_lock():
-            clamped = self.core.set_target(target, now)
-        if clamped:
-            self._warn_throttled("command clamped to the configured limits")
-
-    def _core_lock(self) -> Any:
-        return self.loop.lock if self.loop is not None else threading.RLock()
-
-    def _warn_throttled(self, text: str, period_s: float = 1.0) -> None:
-        now = time.monotonic()
-        if now - self._last_warn_s >= period_s:
-            self._last_warn_s = now
-            self.get_logger().warning(text)
 
     def _on_fault(self, reason: str) -> None:
         self.get_logger().error(f"FAULT: {reason}; zero torque and motor off sent")
