@@ -44,6 +44,7 @@ import gzip
 import json
 import sys
 from collections import defaultdict
+from collections.abc import Callable
 from multiprocessing import Pool
 from pathlib import Path
 from typing import Any
@@ -241,19 +242,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "log":
         return _log(parser, args)
-    rows = []
-    for path in args.logs:
-        try:
-            rows += [json.loads(line) for line in _read(path).splitlines()]
-        except (OSError, ValueError) as err:  # (json and gzip errors are ValueErrors)
-            parser.error(f"{path}: not a log of this script ({err})")
-        keys = {"campaign", "found", "declared", "steps", "truth"}
-        if any(not isinstance(r, dict) or not keys <= r.keys() for r in rows):
-            parser.error(f"{path}: not a log of this script (a line without {sorted(keys)})")
-    failed = [r["campaign"] for r in rows if not isinstance(r["found"], list)]
-    rows = [r for r in rows if isinstance(r["found"], list)]
-    if not rows:
-        parser.error("no campaign analysed without error in the logs")
+    rows, failed = read_logs(parser, args.logs, {"campaign", "found", "declared", "steps", "truth"})
     lines, data = table(rows)
     if failed:  # (said, not dropped silently)
         lines[2:2] = [f"Left out, the tool failed on them: {', '.join(failed)}.", ""]
@@ -262,12 +251,38 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def read_logs(
+    parser: argparse.ArgumentParser, paths: list[Path], keys: set[str]
+) -> tuple[list[dict[str, Any]], list[str]]:
+    """The rows of logs (each with ``keys``) of campaigns the tool ran on, and the names of
+    those it failed on; a file that is no such log is refused by ``parser``."""
+    rows = []
+    for path in paths:
+        try:
+            rows += [json.loads(line) for line in _read(path).splitlines()]
+        except (OSError, ValueError) as err:  # (json and gzip errors are ValueErrors)
+            parser.error(f"{path}: not a log of this script ({err})")
+        if any(not isinstance(r, dict) or not keys <= r.keys() for r in rows):
+            parser.error(f"{path}: not a log of this script (a line without {sorted(keys)})")
+    failed = [r["campaign"] for r in rows if not isinstance(r["found"], list)]
+    rows = [r for r in rows if isinstance(r["found"], list)]
+    if not rows:
+        parser.error("no campaign analysed without error in the logs")
+    return rows, failed
+
+
 def _read(path: Path) -> str:
     """A log's text (``.gz``: compressed, as the committed logs are)."""
     return gzip.decompress(path.read_bytes()).decode() if path.suffix == ".gz" else path.read_text()
 
 
-def _log(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+def _log(
+    parser: argparse.ArgumentParser,
+    args: argparse.Namespace,
+    analyse: Callable[[Path], dict[str, Any]] = log_campaign,
+) -> int:
+    """``log``: ``analyse`` (one campaign -> its row) on the seeds not yet in the log, each
+    row appended with the campaign's truth (also benchmarks/alike_calibration.py's)."""
     answers_file = args.zoo / "answers.yaml"
     if not answers_file.is_file():
         parser.error(f"--zoo {args.zoo}: no answers.yaml (make it with drop_zoo.py)")
@@ -285,7 +300,7 @@ def _log(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         parser.error(f"--zoo {args.zoo}: no campaign {missing[0]} in answers.yaml")
     args.log.parent.mkdir(parents=True, exist_ok=True)
     with Pool(args.jobs) as pool, args.log.open("a") as out:
-        for k, row in enumerate(pool.imap(log_campaign, todo), 1):
+        for k, row in enumerate(pool.imap(analyse, todo), 1):
             row["truth"] = answers[row["campaign"]]
             out.write(json.dumps(row) + "\n")
             out.flush()
