@@ -257,19 +257,30 @@ def test_cogging_and_a_hub_arm_spring_act_only_where_their_physics_acts(tmp_path
     assert np.max(np.abs(q_soft - q_rigid)) > 1e-3
 
 
-def test_the_cogging_scan_finds_a_waves_period_and_size(tmp_path: Path) -> None:
+@pytest.mark.parametrize("between", [False, True])
+def test_the_cogging_scan_finds_a_waves_period_and_size(tmp_path: Path, between: bool) -> None:
     """Recordings whose encoder and height readings are what the tool's own simulation gives
-    with a cogging wave (N = 70 per revolution, 0.03 N m), plus noise: the scan picks N within
-    2 and the fit measures the amplitude within 10 %. (How often it is named on rigs that are
-    not ours: the zoo survey, docs/discrepancy.md.)"""
+    with a cogging wave (N = 70 per revolution, or one halfway between two periods the scan's
+    first pass tries, 0.03 N m), plus noise: the scan picks N within 2 (that one exactly) and
+    the fit measures the amplitude within 10 %. (How often it is named on rigs that are not
+    ours: the zoo survey, docs/discrepancy.md.)"""
+    from transparency_ros.analysis.discrepancy import drop_cogging  # noqa: PLC0415
     from transparency_ros.analysis.discrepancy.fitting import fit_candidate  # noqa: PLC0415
 
+    periods = 70
+    if between:  # (the first pass's grid, from the travel of the same trials without a wave)
+        span = _self_simulated(tmp_path / "plain").position_span
+        stride = int(2 * drop_cogging.COGGING_DRIFT_RAD / span)
+        assert stride >= 2  # (else no period is between two tried ones)
+        coarsest = math.ceil(2 * math.pi / span)
+        periods = coarsest + stride * ((100 - coarsest) // stride) + stride // 2
     problem = _self_simulated(
-        tmp_path, cogging_nm=0.03, cogging_periods=70.0, cogging_phase_rad=0.8
+        tmp_path, cogging_nm=0.03, cogging_periods=float(periods), cogging_phase_rad=0.8
     )
     cogging = next(c for c in problem.candidates() if c.name == "cogging")
     x, _ = fit_candidate(problem, [], [], cogging)
-    assert abs(cogging.periods - 70) <= 2
+    # (halfway between two periods of the first pass: found at its own by the second)
+    assert cogging.periods == periods if between else abs(cogging.periods - periods) <= 2
     assert x[0] == pytest.approx(0.03, rel=0.1)
 
 
