@@ -28,7 +28,6 @@ allowed or neither by the truth, against the one named.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 from typing import Any
@@ -168,29 +167,17 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from _results import write_results  # noqa: PLC0415
-    from share_calibration import _log, read_logs  # noqa: PLC0415
+    from share_calibration import calibration_main  # noqa: PLC0415
 
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    log = sub.add_parser("log", help="run the tool on campaigns, every choice logged")
-    log.add_argument("--zoo", type=Path, required=True, help="campaigns made by drop_zoo.py")
-    log.add_argument("--seeds", required=True, help="A-B")
-    log.add_argument("--log", type=Path, required=True, help="JSON lines, appended")
-    log.add_argument("--jobs", type=int, default=1, help="campaigns analysed at once")
-    tab = sub.add_parser("table", help="the tolerances from logs")
-    tab.add_argument("logs", type=Path, nargs="+")
-    tab.add_argument("--out", default=str(Path(__file__).parent / "results"))
-    args = parser.parse_args(argv)
-    if args.command == "log":
-        return _log(parser, args, log_choices)
-    rows, failed = read_logs(parser, args.logs, KEYS)
-    lines, data = table(rows)
-    if failed:  # (said, not dropped silently)
-        lines[2:2] = [f"Left out, the tool failed on them: {', '.join(failed)}.", ""]
-        data["failed"] = failed
-    write_results(args.out, "alike_calibration", lines, data)
-    return 0
+    return calibration_main(
+        argv,
+        __doc__,
+        name="alike_calibration",
+        logged="every choice",
+        analyse=log_choices,
+        table=table,
+        keys=KEYS,
+    )
 
 
 if __name__ == "__main__":

@@ -227,27 +227,51 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    return calibration_main(
+        argv,
+        __doc__,
+        name="share_calibration",
+        logged="every single step",
+        analyse=log_campaign,
+        table=table,
+        keys={"campaign", "found", "declared", "steps", "truth"},
+    )
+
+
+def calibration_main(
+    argv: list[str] | None,
+    doc: str,
+    *,
+    name: str,
+    logged: str,
+    analyse: Callable[[Path], dict[str, Any]],
+    table: Callable[[list[dict[str, Any]]], tuple[list[str], dict[str, Any]]],
+    keys: set[str],
+) -> int:
+    """A calibration benchmark's command line: ``log`` (``analyse`` on zoo campaigns, what it
+    records appended to a log) and ``table`` (``table`` of logs whose rows have ``keys``,
+    written to results/``name``.md and .json); also benchmarks/alike_calibration.py's."""
     from _results import write_results  # noqa: PLC0415
 
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=doc.split("\n\n", maxsplit=1)[0])
     sub = parser.add_subparsers(dest="command", required=True)
-    log = sub.add_parser("log", help="run the tool on campaigns, every single step logged")
+    log = sub.add_parser("log", help=f"run the tool on campaigns, {logged} logged")
     log.add_argument("--zoo", type=Path, required=True, help="campaigns made by drop_zoo.py")
     log.add_argument("--seeds", required=True, help="A-B")
     log.add_argument("--log", type=Path, required=True, help="JSON lines, appended")
     log.add_argument("--jobs", type=int, default=1, help="campaigns analysed at once")
-    tab = sub.add_parser("table", help="the shares from logs")
+    tab = sub.add_parser("table", help="the table from logs")
     tab.add_argument("logs", type=Path, nargs="+")
     tab.add_argument("--out", default=str(Path(__file__).parent / "results"))
     args = parser.parse_args(argv)
     if args.command == "log":
-        return _log(parser, args)
-    rows, failed = read_logs(parser, args.logs, {"campaign", "found", "declared", "steps", "truth"})
+        return _log(parser, args, analyse)
+    rows, failed = read_logs(parser, args.logs, keys)
     lines, data = table(rows)
     if failed:  # (said, not dropped silently)
         lines[2:2] = [f"Left out, the tool failed on them: {', '.join(failed)}.", ""]
         data["failed"] = failed
-    write_results(args.out, "share_calibration", lines, data)
+    write_results(args.out, name, lines, data)
     return 0
 
 
