@@ -78,11 +78,9 @@ class DropCogging(DropEffect):
         stride = max(1, int(2 * COGGING_DRIFT_RAD / span))
         # every N's two waves in one simulation: each set carries its own N
         probe = [*effects, _CoggingProbe()]
-        base = problem.error_sets(probe, [[*params, np.array([0.0, 0.0, coarsest])]], False)[0]
-        sampled = [*range(coarsest, finest + 1, stride), finest]
-        linear = _linear_scan(
-            problem, probe, params, base, sorted(set(sampled)), largest=self.upper[0]
-        )
+        sampled = sorted({*range(coarsest, finest + 1, stride), finest})
+        # (the error without a wave simulated with the first pass's waves)
+        base, linear = _linear_scan(problem, probe, params, None, sampled, largest=self.upper[0])
         if stride > 1:
             best = sorted(linear, key=lambda n: -linear[n][0])[:COGGING_FINALISTS]
             around = {
@@ -92,7 +90,7 @@ class DropCogging(DropEffect):
             }
             linear |= _linear_scan(
                 problem, probe, params, base, sorted(around - set(linear)), largest=self.upper[0]
-            )
+            )[1]
         # the linear prediction errs where the wave moves the arm by a good part of its period:
         # the best few and their neighbours (N is seen to within a period or two over a short
         # swing) simulated at their sizes, the best kept
@@ -115,21 +113,24 @@ def _linear_scan(
     problem: DropProblem,
     probe: list[DropEffect],
     params: Sequence[FloatArray],
-    base: FloatArray,
+    base: FloatArray | None,
     periods: Sequence[int],
     *,
     largest: float,
-) -> dict[int, tuple[float, FloatArray]]:
+) -> tuple[FloatArray, dict[int, tuple[float, FloatArray]]]:
     """For each N of ``periods``: the error's response to a small sine wave and a small cosine
     wave (simulated, all N in one run), the two waves' sizes that remove most of the error
-    ``base`` (linear least squares), and the error they remove: {N: (removed, (A, phase))}."""
-    sets = []
+    ``base`` (linear least squares), and the error they remove. ``base`` None: the error
+    without a wave is simulated in the same run. Returns (base, {N: (removed, (A, phase))})."""
+    sets = [] if base is not None else [[*params, np.array([0.0, 0.0, periods[0]])]]
     for n in periods:
         sets += [
             [*params, np.array([COGGING_PROBE_NM, 0.0, n])],
             [*params, np.array([COGGING_PROBE_NM, math.pi / 2, n])],
         ]
     errors = problem.error_sets(probe, sets, False) if sets else []
+    if base is None:
+        base, errors = errors[0], errors[1:]
     linear: dict[int, tuple[float, FloatArray]] = {}
     for k, n in enumerate(periods):
         basis = np.stack([errors[2 * k] - base, errors[2 * k + 1] - base], axis=1)
@@ -137,7 +138,7 @@ def _linear_scan(
         removed = float(base @ base - np.sum((base + basis @ np.array([a, b])) ** 2))
         a, b = a * COGGING_PROBE_NM, b * COGGING_PROBE_NM
         linear[n] = (removed, np.array([min(math.hypot(a, b), largest), math.atan2(b, a)]))
-    return linear
+    return base, linear
 
 
 class _CoggingProbe(DropEffect):
