@@ -19,9 +19,9 @@ tolerance, or is it where misses come from?
 and writes every choice of a round (the steps that passed the rule, and which was named) with
 the campaign's truth: JSON lines, one per campaign, appended.
 
-``table`` reads such logs and takes every logged choice again with other tolerances, as
-``choose`` would (``pick``; with ``ALIKE`` it must give the logged choice, and the table says
-in how many choices it does). First-order, per campaign its first choice that changes (a name
+``table`` reads such logs and takes every logged choice again with other tolerances, by
+``steps.choose`` itself (``pick``; with ``ALIKE`` it must give the logged choice, and the table
+says in how many choices it does). First-order, per campaign its first choice that changes (a name
 taken otherwise changes the rounds after it): whether the effect named instead is required,
 allowed or neither by the truth, against the one named.
 """
@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -81,20 +82,34 @@ def log_choices(campaign: Path) -> dict[str, Any]:
     return {"campaign": campaign.name, "found": found, "choices": choices}
 
 
-def pick(steps: list[dict[str, Any]], tolerance: float) -> dict[str, Any]:
-    """The step ``steps.choose`` names among logged ``steps`` with ``tolerance`` for ALIKE."""
-    from transparency_ros.analysis.discrepancy.steps import EXPECTED_MARGIN  # noqa: PLC0415
+def as_step(entry: dict[str, Any]) -> Any:
+    """A logged step as ``steps.choose`` sees it (its effects: name, parameter count, whether
+    it yields to others)."""
+    import numpy as np  # noqa: PLC0415
 
-    top = min(steps, key=lambda c: c["aic"])
-    at_floor = top["judged"][1] <= top["judged"][2]
-    alike = [
-        c for c in steps
-        if c["rmse"] <= tolerance * top["rmse"] or (at_floor and c["judged"][1] <= c["judged"][2])
-    ]  # fmt: skip
-    predicted = [c for c in steps if c["rmse"] <= EXPECTED_MARGIN * top["rmse"] and c["expected"]]
-    if predicted and not any(c in predicted for c in alike):
-        alike = [*alike, *predicted]
-    return min(alike, key=lambda c: (c["k"], not c["expected"], c["yields"], c["aic"]))
+    from transparency_ros.analysis.discrepancy.steps import Step  # noqa: PLC0415
+
+    effects = [
+        SimpleNamespace(name=n, discrete_choices=0, yields_to=entry["yields"])
+        for n in entry["names"]
+    ]
+    # (the step's parameters all on its first effect: choose() counts only their sum)
+    params = [np.zeros(entry["k"] if i == 0 else 0) for i in range(len(effects))]
+    return Step(
+        added=effects, params=params, err=np.zeros(1), rmse=entry["rmse"], aic=entry["aic"],
+        gain=0.0, judged=tuple(entry["judged"]), result=None, meaningful=True,
+    )  # fmt: skip
+
+
+def pick(steps: list[dict[str, Any]], tolerance: float) -> dict[str, Any]:
+    """The logged step ``steps.choose`` names among ``steps`` with ``tolerance`` for ALIKE."""
+    from transparency_ros.analysis.discrepancy.steps import choose  # noqa: PLC0415
+
+    made = [as_step(s) for s in steps]
+    # (a step's flag on each of its effects: choose() asks all of them)
+    expected = {id(a): s["expected"] for m, s in zip(made, steps, strict=True) for a in m.added}
+    named = choose(made, lambda a, _p: expected[id(a)], tolerance=tolerance)
+    return next(s for m, s in zip(made, steps, strict=True) if m is named)
 
 
 def kind(names: list[str], truth: dict[str, Any]) -> str:

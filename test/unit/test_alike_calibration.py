@@ -6,12 +6,9 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
-import numpy as np
-
-from transparency_ros.analysis.discrepancy.steps import ALIKE, Step, choose
+from transparency_ros.analysis.discrepancy.steps import ALIKE, choose
 
 BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
@@ -25,19 +22,6 @@ def _logged(names: list[str], rmse: float, aic: float, k: int, **kw: Any) -> dic
         "expected": kw.get("expected", False), "yields": kw.get("yields", 0),
         "chosen": kw.get("chosen", False),
     }  # fmt: skip
-
-
-def _step(entry: dict[str, Any]) -> Step:
-    """A search step as choose() sees it, from a logged one."""
-    effects = [
-        SimpleNamespace(name=n, discrete_choices=0, yields_to=entry["yields"])
-        for n in entry["names"]
-    ]
-    params = [np.zeros(entry["k"] if i == 0 else 0) for i in range(len(effects))]
-    return Step(
-        added=effects, params=params, err=np.zeros(1), rmse=entry["rmse"], aic=entry["aic"],
-        gain=0.9, judged=tuple(entry["judged"]), result=None, meaningful=True,
-    )  # fmt: skip
 
 
 def test_pick_with_the_package_tolerance_is_choose() -> None:
@@ -57,7 +41,7 @@ def test_pick_with_the_package_tolerance_is_choose() -> None:
         [cogging, rebound, offset],
         [cogging, rebound],
     ):
-        made = [_step(s) for s in steps]
+        made = [alike_calibration.as_step(s) for s in steps]
         expected = {id(m.added[0]): s["expected"] for m, s in zip(made, steps, strict=True)}
         named = choose(made, lambda a, _p, e=expected: e[id(a)])
         assert alike_calibration.pick(steps, ALIKE) is steps[made.index(named)]

@@ -100,7 +100,9 @@ def same(a: Any, b: Any) -> bool:
     return bool(a.name == b.name)
 
 
-def choose(steps: list[Step], expected: Callable[[Any, FloatArray], bool]) -> Step | None:
+def choose(
+    steps: list[Step], expected: Callable[[Any, FloatArray], bool], tolerance: float = ALIKE
+) -> Step | None:
     """The best step by the information criterion. Steps that explain the held-out data
     alike (within 5 % RMSE, or both down to the noise floor they are judged against) cannot
     be told apart here: the one with the fewest parameters is named, the others are listed
@@ -112,7 +114,8 @@ def choose(steps: list[Step], expected: Callable[[Any, FloatArray], bool]) -> St
     offset that held the arm away from theta_d before contact), and such a step is
     considered up to 10 % behind the best. Then a candidate that ``yields_to`` others (a
     rebound off the contact, which a ring of a compliant arm also makes; a drift of the
-    Coulomb torque alone, which an offset imitates) comes after them."""
+    Coulomb torque alone, which an offset imitates) comes after them. ``tolerance``: the
+    RMSE ratio taken as alike (benchmarks/alike_calibration.py tries others)."""
     if not steps:
         return None
     top = min(steps, key=lambda c: c.aic)
@@ -120,7 +123,7 @@ def choose(steps: list[Step], expected: Callable[[Any, FloatArray], bool]) -> St
     at_floor = top.judged[1] <= top.judged[2]
     alike = [
         c for c in steps
-        if c.rmse <= ALIKE * top.rmse or (at_floor and c.judged[1] <= c.judged[2])
+        if c.rmse <= tolerance * top.rmse or (at_floor and c.judged[1] <= c.judged[2])
     ]  # fmt: skip
     # what the recording predicts may be 10 % behind the best and still be preferred
     predicted = [
