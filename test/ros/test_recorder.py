@@ -19,6 +19,7 @@ from transparency_ros.bag.errors import BagWriteError
 from transparency_ros.bag.keys import INTERRUPTED_KEY
 from transparency_ros.bag.reader import joint_series, open_bag
 from transparency_ros.bag.writer import BagWriter
+from transparency_ros.core.cdr import header_stamp_ns
 from transparency_ros.core.interrupts import Terminated, terminate_like_interrupt
 from transparency_ros.ros.recorder import Recorder
 
@@ -88,4 +89,34 @@ def test_a_failing_write_stops_the_recording_and_is_reported(
                 recorder.stop()
     finally:
         spinner.stop()
+        node.destroy_node()
+
+
+def test_a_watcher_sees_every_message_recording_or_not(
+    ros_context: Context, tmp_path: Path
+) -> None:
+    node = Node("recorder_test", context=ros_context)
+    seen: list[bytes] = []
+    recorder = Recorder(node, {"/joint_states": JointState}, watch={"/joint_states": seen.append})
+    spinner = Spinner(ros_context, node)
+    try:
+        _publish(node, 5)  # not recording
+        assert wait_for(lambda: len(seen) == 5)
+        with BagWriter(tmp_path / "bag") as bag:
+            recorder.start(bag)
+            _publish(node, 3)
+            assert wait_for(lambda: len(seen) == 8)
+            assert recorder.stop() == {"/joint_states": 3}
+    finally:
+        spinner.stop()
+        node.destroy_node()
+    assert [header_stamp_ns(data) - 10**9 for data in seen] == [0, 1, 2, 3, 4, 0, 1, 2]
+
+
+def test_a_watched_topic_that_is_not_recorded_is_refused(ros_context: Context) -> None:
+    node = Node("recorder_test", context=ros_context)
+    try:
+        with pytest.raises(ValueError, match="watched topics not recorded: /contact"):
+            Recorder(node, {"/joint_states": JointState}, watch={"/contact": print})
+    finally:
         node.destroy_node()

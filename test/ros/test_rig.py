@@ -5,6 +5,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -14,11 +15,15 @@ import pytest
 
 pytest.importorskip("rclpy")
 from mcap.reader import make_reader
+from sensor_msgs.msg import JointState
 
 from test.ros.conftest import wait_for
 from transparency_ros.analysis.drop_eval import IncompleteTrialError, evaluate, evaluate_trial
 from transparency_ros.bag.reader import joint_series, open_bag, scalar_series
 from transparency_ros.core.contact_model import model_for
+from transparency_ros.ros.harness import Listener
+from transparency_ros.ros.rig_run import RigRunError, _Station
+from transparency_ros.ros.services import ServiceCaller
 
 pytestmark = pytest.mark.ros
 
@@ -148,3 +153,31 @@ def test_an_existing_trial_bag_is_refused_before_any_node_starts(tmp_path: Path)
         "already (h0200.0mm_t01): choose another --out or remove them"
     ]
     assert not (tmp_path / "bags" / "U10DD").exists()  # nothing started, nothing written
+
+
+def test_a_trial_waits_for_the_estimator_to_estimate_after_its_command() -> None:
+    """The drop waits until /estimated_effort carries a sample stamped after the trial's
+    command: an estimator still starting (a busy machine) detected the impact late (CI: t_r
+    194 ms for 5.8 ms) or not at all. A silent estimator is named, not waited on forever."""
+    listener = Listener("rig_wait_test")
+    with listener as node:
+        station = _Station(node, ServiceCaller(node, listener.failure))
+        pub = node.create_publisher(JointState, "/estimated_effort", 10)
+        assert wait_for(lambda: pub.get_subscription_count() > 0)
+        with pytest.raises(RigRunError, match=r"within 0.5 s \(/estimated_effort heard: none\)"):
+            station.wait_estimating(10**18, timeout_s=0.5)
+        commanded = 1_795_000_000 * 10**9
+
+        def estimate(stamp_ns: int) -> None:
+            msg = JointState(name=["joint"], position=[0.0], effort=[0.0])
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+            pub.publish(msg)
+
+        estimate(commanded - 1)  # a sample before the command: still catching up
+        assert wait_for(lambda: station.newest_estimate_ns == commanded - 1)
+        with pytest.raises(RigRunError, match="heard: only of older samples"):
+            station.wait_estimating(commanded, timeout_s=0.5)
+        threading.Timer(0.3, estimate, (commanded + 1_000_000,)).start()
+        started = time.monotonic()
+        station.wait_estimating(commanded, timeout_s=10.0)
+        assert time.monotonic() - started >= 0.25  # it waited for that sample

@@ -123,8 +123,9 @@ def run_cell(
                 procs[name] = start_node(name, {}, extra=extra, domain_id=domain)
             else:
                 procs[name] = start_node(name, values, domain_id=domain)
-        with Listener("feelcage_runner") as node:
-            return _trial(node, setup, settle, lambda: first_exited(procs))
+        listener = Listener("feelcage_runner")
+        with listener as node:
+            return _trial(node, setup, settle, lambda: first_exited(procs) or listener.failure())
     finally:
         for name, proc in procs.items():
             logs[name] = stop_node(proc)

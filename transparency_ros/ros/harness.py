@@ -19,7 +19,8 @@ from types import TracebackType
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.exceptions import InvalidHandle
+from rclpy.executors import ExternalShutdownException, ShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.utilities import try_shutdown
 
@@ -81,15 +82,50 @@ def driver_left_motor_enabled(log: str) -> str | None:
 
 
 class Listener:
-    """``with Listener("name") as node:`` an rclpy node spinning in a background thread."""
+    """``with Listener("name") as node:`` an rclpy node spinning in a background thread.
+
+    The thread spins turn by turn until the block ends; only then is the executor shut down and
+    the node destroyed (rclpy's executor must not be shut down under a spinning thread: it
+    clears its guard condition while the thread still triggers it). An entity destroyed by the
+    caller's thread while the executor builds its wait set raises InvalidHandle there, which
+    rclpy does not catch; the turn is dropped and the next leaves the entity out (the thread
+    used to die of it, and every service call after it timed out). Any other exception from a
+    callback stops the thread: :meth:`failure` names it, for the caller's checks."""
 
     def __init__(self, name: str) -> None:
+        self.name = name
         self.context = Context()
         rclpy.init(context=self.context)
         self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._spin, name=f"{name} executor", daemon=True)
+
+    def _spin(self) -> None:
+        while not self._stop.is_set() and self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except InvalidHandle:
+                continue  # an entity destroyed meanwhile: gone from the next wait set
+            except (ExternalShutdownException, ShutdownException):
+                return
+            except Exception as err:  # noqa: BLE001 - kept for failure(), the caller decides
+                self._error = err
+                return
+
+    def failure(self) -> str | None:
+        """Why the executor thread stopped before the block ended (None while it spins)."""
+        if self._error is not None:
+            return f"{self.name}'s executor stopped: {type(self._error).__name__}: {self._error}"
+        if (
+            self._thread.ident is not None
+            and not self._thread.is_alive()
+            and not self._stop.is_set()
+        ):
+            return f"{self.name}'s executor stopped (context shut down)"
+        return None
 
     def __enter__(self) -> Node:
         self._thread.start()
@@ -101,7 +137,9 @@ class Listener:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.executor.shutdown()
-        self._thread.join(timeout=5.0)
-        self.node.destroy_node()
+        self._stop.set()
+        self._thread.join(timeout=10.0)
+        self.executor.shutdown(timeout_sec=1.0)
+        if not self._thread.is_alive():  # destroying a node in use by a spinning executor hangs
+            self.node.destroy_node()
         try_shutdown(context=self.context)

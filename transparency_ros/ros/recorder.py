@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import threading
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from functools import partial
 from typing import Any
 
@@ -31,8 +31,21 @@ def type_name(msg_class: Any) -> str:
 
 
 class Recorder:
-    def __init__(self, node: Node, topics: Mapping[str, Any], depth: int = 2000) -> None:
+    """``watch``: per topic, a callable that also sees every serialized message as it arrives,
+    recording or not (from the executor's thread; one subscription serves both)."""
+
+    def __init__(
+        self,
+        node: Node,
+        topics: Mapping[str, Any],
+        depth: int = 2000,
+        watch: Mapping[str, Callable[[bytes], None]] | None = None,
+    ) -> None:
         self.node = node
+        self.watch = dict(watch or {})
+        unknown = set(self.watch) - set(topics)
+        if unknown:
+            raise ValueError(f"watched topics not recorded: {', '.join(sorted(unknown))}")
         self.types = {topic: type_name(cls) for topic, cls in topics.items()}
         self._lock = threading.Lock()
         self._bag: BagWriter | None = None
@@ -45,6 +58,9 @@ class Recorder:
 
     def _on_message(self, topic: str, data: bytes) -> None:
         now = self.node.get_clock().now().nanoseconds
+        watcher = self.watch.get(topic)
+        if watcher is not None:
+            watcher(data)
         with self._lock:
             if self._bag is None:
                 return

@@ -7,7 +7,10 @@ records /joint_states, /joint_commands, /contact, /estimated_effort as they arri
 rig's DAQ blocks written out as the contract's 10 kHz /load_cell and /shuttle/height messages.
 
 Per trial: set ``sim_drop_height_m``, lift the shuttle (``~/sim/lift``), let the arm settle,
-reset the estimator, start recording, command theta_d = 0, drop (``~/sim/drop``), record for the
+reset the estimator, start recording, command theta_d = 0, wait until the estimator has
+estimated a sample stamped after that command (it is matched to the driver's streams and
+estimating: on a busy machine that can take a second after its process started, and a drop
+before it would be detected late or not at all), drop (``~/sim/drop``), record for the
 free-fall time plus ``after_contact_s``, stop, write the bag (atomically; a bag directory that
 cannot take it is refused before the first trial).
 """
@@ -31,6 +34,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 from transparency_ros.bag.writer import BagWriter, check_writable, message_types, time_msg
+from transparency_ros.core.cdr import CdrError, decode_joint_state, header_stamp_ns
 from transparency_ros.core.config import get_actuator, load_drop_test
 from transparency_ros.core.drop_rig import GRAVITY
 from transparency_ros.core.errors import TransparencyError
@@ -53,6 +57,9 @@ RECORDED = {
     "/estimated_effort": JointState,
 }
 DAQ_TOPIC = "/actuator_driver/sim/daq"
+# how long a trial waits for the estimator to estimate a sample stamped after its command (its
+# process starting on a busy machine; the setpoint join holds a joint's first samples up to 5 s)
+ESTIMATOR_WAIT_S = 20.0
 
 
 class RigRunError(TransparencyError, RuntimeError):
@@ -149,10 +156,11 @@ def run_rig(
         procs["contact_estimator"] = start_node("contact_estimator", {
             "k_s": k_s, "contact_onset_rad": threshold, "contact_release_rad": threshold / 2,
         }, domain_id=domain)  # fmt: skip
-        with Listener("transparency_rig") as node:
-            call = ServiceCaller(node, lambda: first_exited(procs))
+        listener = Listener("transparency_rig")
+        with listener as node:
+            call = ServiceCaller(node, lambda: first_exited(procs) or listener.failure())
             station = _Station(node, call)
-            _joint_position(node, call, 20.0, "within 20 s of starting")
+            station.position(20.0, "within 20 s of starting")
             mass = drop.shuttle_mass_for(actuator)
             for h in heights_m:
                 for trial in range(1, trials_per_height + 1):
@@ -163,7 +171,7 @@ def run_rig(
                     time.sleep(0.5)  # the arm springs back, and stops where friction holds it
                     # zero the virtual spring where the arm rests (geared actuators stop up to
                     # tau_s / k_s from theta_d, more than the 0.1 rad threshold), then listen
-                    rest = _joint_position(node, call, 5.0, "while the arm rests")
+                    rest = station.position(5.0, "while the arm rests")
                     station.command(rest)
                     time.sleep(0.1)
                     call(Trigger, "/contact_estimator/reset", Trigger.Request())
@@ -205,20 +213,70 @@ class _Station:
 
     def __init__(self, node: Any, call: ServiceCaller) -> None:
         self.node, self.call = node, call
-        self.recorder = Recorder(node, RECORDED)
+        self.newest_estimate_ns = -1  # the newest /estimated_effort stamp heard
+        self._state: bytes | None = None  # the latest /joint_states sample, serialized
+        self._states_heard = 0
+        # the recorder's subscriptions serve these too: none made and destroyed per trial
+        self.recorder = Recorder(
+            node,
+            RECORDED,
+            watch={"/estimated_effort": self._on_estimate, "/joint_states": self._on_state},
+        )
         self.commands = node.create_publisher(JointState, "/joint_commands", 10)
         self.daq: list[Float64MultiArray] = []
         self.recording = False
         node.create_subscription(Float64MultiArray, DAQ_TOPIC, self._on_daq, 100)
 
+    def _on_estimate(self, data: bytes) -> None:
+        try:
+            stamp_ns = header_stamp_ns(data)
+        except CdrError:
+            return  # not ours to judge: the recorder keeps it, eval reads it
+        self.newest_estimate_ns = max(self.newest_estimate_ns, stamp_ns)
+
+    def _on_state(self, data: bytes) -> None:
+        self._state = data
+        self._states_heard += 1
+
+    def position(self, timeout_s: float, what: str) -> float:
+        """The arm's position now: the next /joint_states sample (RigRunError naming ``what``)."""
+        heard = self._states_heard
+        deadline = time.monotonic() + timeout_s
+        while self._states_heard == heard:
+            self.call.check()
+            if time.monotonic() > deadline:
+                raise RigRunError(f"actuator_driver published no /joint_states {what}")
+            time.sleep(0.01)
+        try:
+            return float(decode_joint_state(self._state or b"").position[0])
+        except (CdrError, IndexError) as err:
+            raise RigRunError(f"/joint_states {what}: no joint position ({err})") from err
+
+    def wait_estimating(self, since_ns: int, timeout_s: float = ESTIMATOR_WAIT_S) -> None:
+        """Return once the estimator has estimated a sample stamped at or after ``since_ns``;
+        RigRunError after ``timeout_s`` (ServiceCallError when a node process has exited)."""
+        deadline = time.monotonic() + timeout_s
+        while self.newest_estimate_ns < since_ns:
+            self.call.check()
+            if time.monotonic() > deadline:
+                heard = "none" if self.newest_estimate_ns < 0 else "only of older samples"
+                raise RigRunError(
+                    f"contact_estimator estimated no /joint_states sample stamped after the "
+                    f"trial's command within {timeout_s:g} s (/estimated_effort heard: {heard})"
+                )
+            time.sleep(0.005)
+
     def _on_daq(self, msg: Float64MultiArray) -> None:
         if self.recording:
             self.daq.append(msg)
 
-    def command(self, theta_d: float) -> None:
+    def command(self, theta_d: float) -> int:
+        """Publish theta_d; return the command's stamp [ns]."""
+        now = self.node.get_clock().now()
         msg = JointState(name=["joint"], position=[theta_d])
-        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.stamp = now.to_msg()
         self.commands.publish(msg)
+        return int(now.nanoseconds)
 
     def record_drop(
         self, bag: BagWriter, theta_d: float, height_m: float, after_contact_s: float
@@ -231,8 +289,10 @@ class _Station:
         self.recording = True
         self.recorder.start(bag)
         try:
-            self.command(theta_d)  # recorded: theta_d of this trial
+            commanded_ns = self.command(theta_d)  # recorded: theta_d of this trial
             time.sleep(0.05)
+            # the estimator in the loop before the drop, not catching up during the impact
+            self.wait_estimating(commanded_ns)
             self.call(Trigger, "/actuator_driver/sim/drop", Trigger.Request())
             time.sleep(math.sqrt(2.0 * height_m / GRAVITY) + after_contact_s)
             time.sleep(0.05)  # the last DAQ block
@@ -245,22 +305,6 @@ class _Station:
                     bag.write_message(topic, ns, msg)
                     counts[topic] = counts.get(topic, 0) + 1
         return counts
-
-
-def _joint_position(node: Any, call: ServiceCaller, timeout_s: float, what: str) -> float:
-    """The arm's position now: the next /joint_states sample (RigRunError naming ``what``)."""
-    got: list[float] = []
-    sub = node.create_subscription(
-        JointState, "/joint_states", lambda m: got.append(float(m.position[0])), 10
-    )
-    deadline = time.monotonic() + timeout_s
-    while not got and time.monotonic() < deadline:
-        call.check()
-        time.sleep(0.01)
-    node.destroy_subscription(sub)
-    if not got:
-        raise RigRunError(f"actuator_driver published no /joint_states {what}")
-    return got[-1]
 
 
 def _set_height(call: ServiceCaller, height_m: float) -> None:
