@@ -115,9 +115,13 @@ def test_a_signal_during_a_trial_leaves_bags_that_open(tmp_path: Path, how: int)
         assert bag.custom_data["transparency.interrupted"] == signal.Signals(how).name
         log_times = [log for _, log, _ in bag.raw(["/joint_states"])]
         assert bag.topics["/load_cell"].count > 0  # the DAQ up to the signal
-    # recorded up to the signal (1 kHz, give or take this machine's scheduling)
-    assert len(log_times) > 100
-    assert abs(max(log_times) * 1e-9 - sent) < 0.1
+    # recorded from the start of the trial up to the signal, without a pause: the stream as it
+    # came (not a count at 1 kHz: beside its estimator and this recorder on 2 cores the simulated
+    # rig streams 450-780 samples/s, 260/s was seen in a loaded test session)
+    received_s = np.sort(np.array(log_times)) * 1e-9
+    assert received_s[-1] - received_s[0] > 0.2  # the bag appeared 0.3 s before the signal
+    assert np.diff(received_s).max() < 0.1
+    assert abs(received_s[-1] - sent) < 0.1
     with pytest.raises(IncompleteTrialError, match="recorded until"):
         evaluate_trial(second)
     skipped: list[Exception] = []

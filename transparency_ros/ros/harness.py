@@ -100,13 +100,16 @@ class Listener:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
+        # wakes the thread's wait at the block's end (a wait with a timeout would cost an rcl
+        # timer per wait set: measurable CPU at 1 kHz)
+        self._wake = self.node.create_guard_condition(lambda: None)
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._spin, name=f"{name} executor", daemon=True)
 
     def _spin(self) -> None:
         while not self._stop.is_set() and self.context.ok():
             try:
-                self.executor.spin_once(timeout_sec=0.05)
+                self.executor.spin_once()
             except InvalidHandle:
                 continue  # an entity destroyed meanwhile: gone from the next wait set
             except (ExternalShutdownException, ShutdownException):
@@ -138,6 +141,7 @@ class Listener:
         tb: TracebackType | None,
     ) -> None:
         self._stop.set()
+        self._wake.trigger()
         self._thread.join(timeout=10.0)
         self.executor.shutdown(timeout_sec=1.0)
         if not self._thread.is_alive():  # destroying a node in use by a spinning executor hangs
