@@ -7,10 +7,10 @@ records /joint_states, /joint_commands, /contact, /estimated_effort as they arri
 rig's DAQ blocks written out as the contract's 10 kHz /load_cell and /shuttle/height messages.
 
 Per trial: set ``sim_drop_height_m``, lift the shuttle (``~/sim/lift``), let the arm settle,
-reset the estimator, start recording, command theta_d = 0, wait until the estimator has
-estimated a sample stamped after that command (it is matched to the driver's streams and
-estimating: on a busy machine that can take a second after its process started, and a drop
-before it would be detected late or not at all), drop (``~/sim/drop``), record for the
+command theta_d = 0, reset the estimator, wait until it has estimated a sample stamped after
+that command (it is matched to the driver's streams and estimating: on a busy machine that can
+take a second after its process started, and a drop before it was detected late or not at all),
+start recording, command theta_d = 0 again (the trial's), drop (``~/sim/drop``), record for the
 free-fall time plus ``after_contact_s``, stop, write the bag (atomically; a bag directory that
 cannot take it is refused before the first trial).
 """
@@ -172,9 +172,12 @@ def run_rig(
                     # zero the virtual spring where the arm rests (geared actuators stop up to
                     # tau_s / k_s from theta_d, more than the 0.1 rad threshold), then listen
                     rest = station.position(5.0, "while the arm rests")
-                    station.command(rest)
+                    commanded_ns = station.command(rest)
                     time.sleep(0.1)
                     call(Trigger, "/contact_estimator/reset", Trigger.Request())
+                    # the estimator in the loop before the trial, not catching up during the
+                    # impact (nor its start-up inside the bag)
+                    station.wait_estimating(commanded_ns)
                     custom = {
                         "transparency.actuator": actuator,
                         "transparency.k_s": repr(k_s),
@@ -289,10 +292,8 @@ class _Station:
         self.recording = True
         self.recorder.start(bag)
         try:
-            commanded_ns = self.command(theta_d)  # recorded: theta_d of this trial
+            self.command(theta_d)  # recorded: theta_d of this trial
             time.sleep(0.05)
-            # the estimator in the loop before the drop, not catching up during the impact
-            self.wait_estimating(commanded_ns)
             self.call(Trigger, "/actuator_driver/sim/drop", Trigger.Request())
             time.sleep(math.sqrt(2.0 * height_m / GRAVITY) + after_contact_s)
             time.sleep(0.05)  # the last DAQ block
