@@ -244,12 +244,8 @@ class _Station:
     def position(self, timeout_s: float, what: str) -> float:
         """The arm's position now: the next /joint_states sample (RigRunError naming ``what``)."""
         heard = self._states_heard
-        deadline = time.monotonic() + timeout_s
-        while self._states_heard == heard:
-            self.call.check()
-            if time.monotonic() > deadline:
-                raise RigRunError(f"actuator_driver published no /joint_states {what}")
-            time.sleep(0.01)
+        if not self._poll(lambda: self._states_heard != heard, timeout_s):
+            raise RigRunError(f"actuator_driver published no /joint_states {what}")
         try:
             return float(decode_joint_state(self._state or b"").position[0])
         except (CdrError, IndexError) as err:
@@ -258,16 +254,23 @@ class _Station:
     def wait_estimating(self, since_ns: int, timeout_s: float = ESTIMATOR_WAIT_S) -> None:
         """Return once the estimator has estimated a sample stamped at or after ``since_ns``;
         RigRunError after ``timeout_s`` (ServiceCallError when a node process has exited)."""
+        if not self._poll(lambda: self.newest_estimate_ns >= since_ns, timeout_s):
+            heard = "none" if self.newest_estimate_ns < 0 else "only of older samples"
+            raise RigRunError(
+                f"contact_estimator estimated no /joint_states sample stamped after the "
+                f"trial's command within {timeout_s:g} s (/estimated_effort heard: {heard})"
+            )
+
+    def _poll(self, condition: Callable[[], bool], timeout_s: float) -> bool:
+        """Whether ``condition`` came true within ``timeout_s``, checking the node processes
+        meanwhile (ServiceCallError when one has exited)."""
         deadline = time.monotonic() + timeout_s
-        while self.newest_estimate_ns < since_ns:
+        while not condition():
             self.call.check()
             if time.monotonic() > deadline:
-                heard = "none" if self.newest_estimate_ns < 0 else "only of older samples"
-                raise RigRunError(
-                    f"contact_estimator estimated no /joint_states sample stamped after the "
-                    f"trial's command within {timeout_s:g} s (/estimated_effort heard: {heard})"
-                )
+                return False
             time.sleep(0.005)
+        return True
 
     def _on_daq(self, msg: Float64MultiArray) -> None:
         if self.recording:
