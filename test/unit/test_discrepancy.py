@@ -376,3 +376,28 @@ def test_a_parameter_held_at_its_null_bound_is_not_told_from_nothing() -> None:
     inside = step(0.3)
     assert not held_at(inside.result, inside.result.x)(0, 0.0)
     assert not null_inside(inside)
+
+
+def test_a_wave_whose_period_stands_out_of_the_scan_is_judged_by_its_prominence() -> None:
+    """A cogging step removing 0.45 of the error above the floor (under the uniform 0.75):
+    named where its period's waves removed PROMINENT_WAVE times what the median period's did,
+    over WAVE_CYCLES periods of the arm's travel; not with the same prominence over one period
+    (a smooth torque any low period imitates), nor with an ordinary one. A pair's wave keeps
+    the uniform share; a step without a scanned choice is judged as before."""
+    from transparency_ros.analysis.discrepancy import discover as d  # noqa: PLC0415
+
+    loop = Discoverer(SimpleNamespace(min_improvement=0.75))  # type: ignore[arg-type]
+    wave = DropOffset(0.03)  # (any effect: what is judged is the step's scan)
+
+    def step(gain: float, prominence: float | None, cycles: float, added: int = 1) -> Step:
+        s = _step(wave, [0.05], 1e-3, 1e-4)
+        s.added = [wave] * added
+        s.gain = gain
+        s.scanned = [] if prominence is None else [(prominence, cycles)]
+        return s
+
+    assert loop._share(step(0.45, d.PROMINENT_WAVE, d.WAVE_CYCLES)) == 0.0
+    assert loop._share(step(0.45, d.PROMINENT_WAVE, d.WAVE_CYCLES - 0.5)) == 0.75
+    assert loop._share(step(0.45, d.PROMINENT_WAVE - 1, 10.0)) == 0.75
+    assert loop._share(step(0.45, d.PROMINENT_WAVE * 3, 10.0, added=2)) == 0.75
+    assert loop._share(step(0.45, None, 0.0)) == 0.75

@@ -282,6 +282,12 @@ def test_the_cogging_scan_finds_a_waves_period_and_size(tmp_path: Path, between:
     # (halfway between two periods of the first pass: found at its own by the second)
     assert cogging.periods == periods if between else abs(cogging.periods - periods) <= 2
     assert x[0] == pytest.approx(0.03, rel=0.1)
+    # its prominence: the chosen period removes more than the median one (on the encoder
+    # alone, not by much: a wave acts where the arm is slow, and there any period does)
+    assert cogging.prominence is not None and cogging.prominence > 1.2
+    assert cogging.wave_cycles == pytest.approx(
+        cogging.periods * problem.position_span / (2 * math.pi)
+    )
 
 
 @pytest.mark.parametrize("start", [1.0, -0.4])

@@ -51,6 +51,10 @@ class DropCogging(DropEffect):
             null=(0.0, math.nan),
         )
         self.periods = 0
+        # what the last scan saw of its period (see scan): the chosen period's share of the
+        # error against the median period's, and the periods the arm's travel spans
+        self.prominence: float | None = None
+        self.wave_cycles = 0.0
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
         return with_cogging(ph, float(p[0]), float(p[1]), self.periods)
@@ -65,8 +69,14 @@ class DropCogging(DropEffect):
         (``COGGING_DRIFT_RAD``), then every N around the best few, the error's response to a
         small sine wave and a small cosine wave (simulated, all N in one run), and the two
         waves' sizes that remove most of the error (linear least squares); the N whose waves,
-        simulated, leave the least error is kept. (Every N once, as before the strides, took
-        half of a campaign's run time: 8.5-13 s of 15-30 s on zoo_10902-10904.)"""
+        simulated, leave the least error is kept. Its ``prominence``: the error its waves
+        remove (linear) against what the median N of the first pass removes, a periodogram's
+        peak against its level (see Discoverer._names). It is high where the load cell shows
+        a wave during the ride (the zoo's hidden coggings: 18-139) and low on the encoder,
+        whose error a wave makes mostly where the arm is slow, and there any period makes
+        one alike (2 on this project's own simulated wave). (Every N once, as before the
+        strides, took half of a campaign's run time: 8.5-13 s of 15-30 s on
+        zoo_10902-10904.)"""
         count = problem.encoder_count
         finest = MOST_COGGING_PERIODS
         if count > 0:
@@ -81,6 +91,8 @@ class DropCogging(DropEffect):
         sampled = sorted({*range(coarsest, finest + 1, stride), finest})
         # (the error without a wave simulated with the first pass's waves)
         base, linear = _linear_scan(problem, probe, params, None, sampled, largest=self.upper[0])
+        # what a period the data do not single out removes: the median of the first pass
+        typical = float(np.median([linear[n][0] for n in sampled]))
         if stride > 1:
             best = sorted(linear, key=lambda n: -linear[n][0])[:COGGING_FINALISTS]
             around = {
@@ -106,6 +118,9 @@ class DropCogging(DropEffect):
             for e in problem.error_sets(probe, [[*params, np.r_[x, m]] for m, x in tried], False)
         ]
         self.periods, start = tried[int(np.argmin(costs))]
+        chosen = linear[self.periods][0]
+        self.prominence = chosen / typical if typical > 0 else (math.inf if chosen > 0 else 0.0)
+        self.wave_cycles = self.periods * span / (2 * math.pi)
         return start
 
 

@@ -48,6 +48,9 @@ class Step:
     alternatives: list[str] = field(default_factory=list)
     shown: bool = False  # stands for a declared effect the recording shows (see _each_added)
     elsewhere: str = ""  # what a second channel showed of it (a problem's shows_elsewhere)
+    # of an added effect whose choice was made from the data by a scan (cogging's period):
+    # (its prominence, the periods the arm's travel spans) when the step was made
+    scanned: list[tuple[float, float]] = field(default_factory=list)
 
     def new(self) -> list[tuple[Any, FloatArray]]:
         return list(zip(self.added, self.params[len(self.params) - len(self.added) :], strict=True))

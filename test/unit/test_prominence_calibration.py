@@ -1,0 +1,54 @@
+"""Cogging's period prominence on logged zoo campaigns, as benchmarks/prominence_calibration.py
+tables it: which campaigns a waived share would name a wave in, with and without a hidden one."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
+
+import prominence_calibration  # noqa: E402
+
+
+def _step(
+    periods: int, prominence: float, cycles: float, *, eligible: bool = True
+) -> dict[str, Any]:
+    return {
+        "stage": "ForceView", "before": ["payload_gravity"], "periods": periods,
+        "amplitude_nm": 0.04, "prominence": prominence, "cycles": cycles, "gain": 0.5,
+        "eligible": eligible, "names": False,
+    }  # fmt: skip
+
+
+def _row(name: str, steps: list[dict[str, Any]], periods: int | None) -> dict[str, Any]:
+    hidden = periods is not None
+    truth = {
+        "required": ["payload_gravity", *(["cogging"] if hidden else [])],
+        "allowed": ["stiction"],
+        "params": {"cogging_periods_per_rev": periods} if hidden else {},
+    }
+    return {"campaign": name, "found": [], "steps": steps, "truth": truth}
+
+
+def test_a_threshold_counts_absent_campaigns_and_hidden_ones_at_their_true_period() -> None:
+    """Absent: a wave of prominence 9 over 5 periods of travel counts from 8 down; one of 40
+    over a single period (a smooth torque) and an ineligible one of 50 never. Hidden (N =
+    100): a prominence of 20 at N = 102 (within 3 %) counts up to 20; one of 60 at N = 140 (a
+    wrong period) never."""
+    rows = [
+        _row("zoo_1", [_step(30, 9.0, 5.0)], None),
+        _row("zoo_2", [_step(12, 40.0, 1.0), _step(80, 50.0, 6.0, eligible=False)], None),
+        _row("zoo_3", [_step(102, 20.0, 7.0)], 100),
+        _row("zoo_4", [_step(140, 60.0, 9.0)], 100),
+    ]
+    _lines, data = prominence_calibration.table(rows)
+    assert (data["absent"], data["hidden"]) == (2, 2)
+    waived = data["waived"]
+    assert waived["8.0"] == {"absent_named": 1, "hidden_named": 2 - 1}
+    assert waived["10.0"] == {"absent_named": 0, "hidden_named": 1}
+    assert waived["30.0"] == {"absent_named": 0, "hidden_named": 0}
+    assert data["absent_largest"] == [9.0, 0.0]
+    assert data["hidden_true_largest"] == [20.0, 0.0]
