@@ -12,7 +12,8 @@ scores it on the held-out trials, and keeps the best only if it removes at least
 ``min_improvement`` of the held-out error above the noise floor (what sensor noise alone would
 cause; for an effect of one sensor's readings, of that sensor's error above its own floor), at
 least a tenth of the floor in absolute terms, the held-out information criterion
-(n log(RSS/n) + 2k) improves by more than 10, and its fit is meaningful. When no single
+(n log(RSS/n) + 2k) improves by more than 10, and its fit is meaningful (a wave whose period
+stands out of its scan is named without the share: ``PROMINENT_WAVE``). When no single
 candidate passes and structure is left, candidates are fitted two at a time (two missing
 effects may each explain too little alone). A kept effect gets its parameters with 95 %
 confidence intervals (from the fit's Jacobian), where it acted (the motion phase whose residual
