@@ -44,46 +44,33 @@ PERIOD_TOLERANCE = 0.03  # a period this close to the truth is the hidden one
 
 def log_campaign(campaign: Path) -> dict[str, Any]:
     """The tool on one campaign, every cogging step recorded."""
-    from transparency_ros.analysis.discrepancy import discover as d  # noqa: PLC0415
-    from transparency_ros.analysis.discrepancy.drop import (  # noqa: PLC0415
-        DropProblem,
-        load_drop_nominal,
-        load_drop_trial,
-    )
+    from share_calibration import logged_run  # noqa: PLC0415
+
     from transparency_ros.analysis.discrepancy.steps import null_inside  # noqa: PLC0415
-    from transparency_ros.bag.reader import find_bags  # noqa: PLC0415
 
-    steps: list[dict[str, Any]] = []
+    def record(loop: Any, s: Any, base: Any, cand: Any, _kw: Any) -> Any:
+        if not s.scanned:
+            return None
+        before, after, floor = s.judged
+        return {
+            "stage": type(loop.problem).__name__,
+            "before": [e.name for e in base.effects],
+            "periods": int(cand.periods),
+            "amplitude_nm": float(s.params[-1][0]),
+            "prominence": s.scanned[0][0],
+            "cycles": s.scanned[0][1],
+            "gain": float(s.gain),
+            # every condition of the rule but the share
+            "eligible": bool(
+                s.meaningful
+                and not null_inside(s)
+                and before - after >= 0.1 * floor
+                and s.aic < base.aic - 10
+            ),
+            "names": bool(loop._names(s, base)),
+        }
 
-    class Logged(d.Discoverer):
-        def _single(self, effects, params, cand, base, **kw):  # type: ignore[no-untyped-def]
-            s = super()._single(effects, params, cand, base, **kw)
-            if s.scanned:
-                before, after, floor = s.judged
-                steps.append({
-                    "stage": type(self.problem).__name__,
-                    "before": [e.name for e in effects],
-                    "periods": int(cand.periods),
-                    "amplitude_nm": float(s.params[-1][0]),
-                    "prominence": s.scanned[0][0],
-                    "cycles": s.scanned[0][1],
-                    "gain": float(s.gain),
-                    "eligible": bool(
-                        s.meaningful
-                        and not null_inside(s)
-                        and before - after >= 0.1 * floor
-                        and s.aic < base.aic - 10
-                    ),
-                    "names": bool(self._names(s, base)),
-                })  # fmt: skip
-            return s
-
-    try:
-        trials = [load_drop_trial(b) for b in find_bags([str(campaign)])]
-        report = Logged(DropProblem(trials, load_drop_nominal(None, trials))).run()
-        found: Any = [f.effect for f in report.findings]
-    except Exception as err:  # noqa: BLE001 - a failure is a result here, with its reason
-        found = f"error: {type(err).__name__}: {err}"
+    found, _declared, steps = logged_run(campaign, record)
     return {"campaign": campaign.name, "found": found, "steps": steps}
 
 

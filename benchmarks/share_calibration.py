@@ -62,44 +62,62 @@ UNIFORM = 0.75  # the one share the logs are made under
 
 def log_campaign(campaign: Path) -> dict[str, Any]:
     """The tool on one campaign under the uniform share, every single step recorded."""
+    from transparency_ros.analysis.discrepancy.steps import null_inside  # noqa: PLC0415
+
+    def record(loop: Any, s: Any, base: Any, cand: Any, kw: Any) -> Any:
+        return {
+            "stage": type(loop.problem).__name__,
+            "before": [e.name for e in base.effects],
+            "cand": cand.name,
+            "gain": float(s.gain),
+            "judged": [float(x) for x in s.judged],
+            "daic": float(s.aic - base.aic),
+            "meaningful": bool(s.meaningful),
+            "null_in": bool(null_inside(s)),
+            "names": bool(loop._names(s, base)),
+            "params": [float(v) for v in s.params[-1]],
+            "after_search": bool(kw.get("after_search", False)),
+        }  # fmt: skip
+
+    found, declared, steps = logged_run(campaign, record, min_improvement=UNIFORM)
+    return {"campaign": campaign.name, "found": found, "declared": declared, "steps": steps}
+
+
+def logged_run(
+    campaign: Path, record: Callable[..., dict[str, Any] | None], **loop: Any
+) -> tuple[Any, list[str], list[dict[str, Any]]]:
+    """The tool on one drop-test campaign (``loop``: the Discoverer's keyword arguments),
+    ``record`` called on every single step as (loop, step, the round's base — its effects are
+    those before the step —, the candidate, the step's keyword arguments): what it returns is
+    logged (None: nothing). Returns (the effects found, or the error as "error: ..."; the declared
+    candidates; the records). Also benchmarks/prominence_calibration.py's."""
     from transparency_ros.analysis.discrepancy import discover as d  # noqa: PLC0415
     from transparency_ros.analysis.discrepancy.drop import (  # noqa: PLC0415
         DropProblem,
         load_drop_nominal,
         load_drop_trial,
     )
-    from transparency_ros.analysis.discrepancy.steps import null_inside  # noqa: PLC0415
     from transparency_ros.bag.reader import find_bags  # noqa: PLC0415
 
-    steps: list[dict[str, Any]] = []
+    records: list[dict[str, Any]] = []
 
     class Logged(d.Discoverer):
         def _single(self, effects, params, cand, base, **kw):  # type: ignore[no-untyped-def]
             s = super()._single(effects, params, cand, base, **kw)
-            steps.append({
-                "stage": type(self.problem).__name__,
-                "before": [e.name for e in effects],
-                "cand": cand.name,
-                "gain": float(s.gain),
-                "judged": [float(x) for x in s.judged],
-                "daic": float(s.aic - base.aic),
-                "meaningful": bool(s.meaningful),
-                "null_in": bool(null_inside(s)),
-                "names": bool(self._names(s, base)),
-                "params": [float(v) for v in s.params[-1]],
-                "after_search": bool(kw.get("after_search", False)),
-            })  # fmt: skip
+            row = record(self, s, base, cand, kw)
+            if row is not None:
+                records.append(row)
             return s
 
     try:
         trials = [load_drop_trial(b) for b in find_bags([str(campaign)])]
         problem = DropProblem(trials, load_drop_nominal(None, trials))
         declared = [c.name for c in problem.candidates() if getattr(c, "declared", False)]
-        report = Logged(problem, min_improvement=UNIFORM).run()
+        report = Logged(problem, **loop).run()
         found: Any = [f.effect for f in report.findings]
     except Exception as err:  # noqa: BLE001 - a failure is a result here, with its reason
         found, declared = f"error: {type(err).__name__}: {err}", []
-    return {"campaign": campaign.name, "found": found, "declared": declared, "steps": steps}
+    return found, declared, records
 
 
 def decisive(row: dict[str, Any]) -> dict[str, float]:
