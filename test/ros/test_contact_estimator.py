@@ -248,7 +248,16 @@ def test_composes_with_a_multi_threaded_executor(ros_context: Context) -> None:
     executor = MultiThreadedExecutor(num_threads=2, context=ros_context)
     executor.add_node(node)
     executor.add_node(probe)
-    thread = threading.Thread(target=executor.spin, daemon=True)
+    # spun turn by turn and joined before the executor is shut down: shutdown() destroys the
+    # guard condition a running spin() may be building its wait set from (its thread died of
+    # "'NoneType' object has no attribute 'handle'" at teardown in one full run)
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.05)
+
+    thread = threading.Thread(target=spin, daemon=True)
     thread.start()
     try:
         assert wait_for(lambda: pub.get_subscription_count() > 0)
@@ -260,10 +269,12 @@ def test_composes_with_a_multi_threaded_executor(ros_context: Context) -> None:
         assert [m.effort[0] for m in got] == pytest.approx([-0.002 * i for i in range(50)])
         assert node.reconfigure(k_s=3.0) is None  # parameter services: the executor
     finally:
+        stop.set()
+        thread.join(timeout=5)
         executor.shutdown()
         node.destroy_node()
         probe.destroy_node()
-        thread.join(timeout=5)
+    assert not thread.is_alive()
     assert not node.hot_path._thread or not node.hot_path._thread.is_alive()
 
 
