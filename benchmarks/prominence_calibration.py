@@ -128,7 +128,7 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
         f" {len(hidden)}. Steps counted: eligible (every condition but the share).",
         "",
         f"The rule ships PROMINENT_WAVE = {PROMINENT_WAVE:g}, WAVE_CYCLES = {WAVE_CYCLES:g}"
-        " (discover.py): a wave at least this prominent over at least this many periods of"
+        " (steps.py): a wave at least this prominent over at least this many periods of"
         " travel is named without the share.",
         "",
         f"Largest prominence of an eligible wave over {WAVE_CYCLES:g} periods of travel or more,"

@@ -61,28 +61,21 @@ from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
 from transparency_ros.analysis.discrepancy.revisit import rivals_again, still_needed
 from transparency_ros.analysis.discrepancy.steps import (
     ALIKE,
+    PROMINENT_WAVE,  # noqa: F401 - the wave's thresholds, read here by tests and benchmarks
+    WAVE_CYCLES,  # noqa: F401
     Base,
     Step,
     choose,
     not_named,
     null_inside,
     same,
+    share_needed,
     total,
 )
 from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem
 from transparency_ros.core.errors import ModelError
 
 PAIR_FINALISTS = 3  # pairs refitted with the effects found before them
-# A wave chosen among every period the recording can show (cogging) removes some of any error.
-# Where its period stands out of the scan (its prominence: what its waves remove against what
-# the median period's remove, drop_cogging.DropCogging.scan) by PROMINENT_WAVE or more, over
-# WAVE_CYCLES periods of the arm's travel at least (fewer is a smooth torque that any low
-# period imitates), the share of the error it must remove is waived: what is left beside it
-# is the model's own error elsewhere (the contact and friction laws), which no wave takes.
-# Measured on zoo campaigns with and without a hidden cogging:
-# benchmarks/prominence_calibration.py.
-PROMINENT_WAVE = 15.0
-WAVE_CYCLES = 2.0
 
 
 class Discoverer:
@@ -524,17 +517,7 @@ class Discoverer:
         )
 
     def _share(self, step: Step) -> float:
-        """The share of the error above the floor ``step`` must remove: ``min_improvement``;
-        none for a single wave whose period stands out of the scan (``PROMINENT_WAVE``, over
-        ``WAVE_CYCLES`` periods of travel at least)."""
-        if (
-            len(step.added) == 1
-            and step.scanned
-            and step.scanned[0][0] >= PROMINENT_WAVE
-            and step.scanned[0][1] >= WAVE_CYCLES
-        ):
-            return 0.0
-        return self.min_improvement
+        return share_needed(step, self.min_improvement)
 
     def _choose(self, steps: list[Step]) -> Step | None:
         return choose(steps, getattr(self.problem, "expected", lambda _e, _p: False))
