@@ -1,0 +1,131 @@
+"""The discrepancy tool on a robot (issue 27): the joints' torque balance as a discovery problem.
+
+A two-link chain simulated from its own URDF (``transparency_ros.synth.robots``) with one
+effect concealed: the loop must name it, at its joint, with its size, and nothing else. The
+same generator shares this project's assumptions; the real double pendulum is run below too.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from transparency_ros.analysis.discrepancy.discover import Discoverer
+from transparency_ros.analysis.discrepancy.robot import RobotProblem
+from transparency_ros.analysis.robot_data import JointRecording
+from transparency_ros.cli import main
+from transparency_ros.core.errors import ConfigError
+from transparency_ros.core.robot_model import RobotModel
+from transparency_ros.synth.robots import chain_urdf, simulate_chain
+
+ENCODER_RAD = 2 * math.pi / 2**14
+
+
+class _Gained:
+    """The chain whose motor on ``joint`` applies ``gain`` times its command."""
+
+    def __init__(self, model: RobotModel, joint: int, gain: float) -> None:
+        self.model, self.joint, self.gain = model, joint, gain
+
+    @property
+    def dof(self) -> int:
+        return int(self.model.dof)
+
+    def forward_dynamics(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        tau = tau.copy()
+        tau[self.joint] *= self.gain
+        return self.model.forward_dynamics(q, v, tau)
+
+
+def runs(truth: object, names: tuple[str, ...], *, delay_steps: int = 0) -> list[JointRecording]:
+    """Three 4 s runs at 1 kHz, positions read through a 14-bit encoder."""
+    out = []
+    for phase in (0.0, 1.3, 2.6):
+        stamps, q, v, command = simulate_chain(
+            truth, np.zeros((4000, len(names))), delay_steps=delay_steps, phase=phase
+        )  # type: ignore[arg-type]
+        q = np.round(q / ENCODER_RAD) * ENCODER_RAD
+        out.append(JointRecording(f"run{phase:g}", stamps, names, q, v, command))
+    return out
+
+
+@pytest.fixture(scope="module")
+def urdf() -> RobotModel:
+    return RobotModel.from_urdf(chain_urdf(2))
+
+
+def found(problem: RobotProblem) -> dict[str, dict[str, float]]:
+    report = Discoverer(problem).run()
+    return {f.effect: f.parameters for f in report.findings}
+
+
+def test_a_joint_whose_motor_applies_less_than_its_command_is_named_with_its_gain(
+    urdf: RobotModel,
+) -> None:
+    names = urdf.joint_names
+    named = found(RobotProblem(urdf, runs(_Gained(urdf, 1, 0.7), names)))
+    assert set(named) == {f"torque_gain[{names[1]}]"}
+    assert named[f"torque_gain[{names[1]}]"]["gain"] == pytest.approx(0.7, rel=0.05)
+
+
+def test_motors_acting_late_are_named_as_the_command_delay(urdf: RobotModel) -> None:
+    # (4 steps of 1 ms, and the simulation holds each command over its step: 4.5 ms)
+    named = found(RobotProblem(urdf, runs(urdf, urdf.joint_names, delay_steps=4)))
+    assert set(named) == {"command_delay"}
+    assert named["command_delay"]["delay_s"] == pytest.approx(0.0045, abs=0.0005)
+
+
+def test_a_robot_its_urdf_describes_gets_nothing_named(urdf: RobotModel) -> None:
+    problem = RobotProblem(urdf, runs(urdf, urdf.joint_names))
+    assert found(problem) == {}
+
+
+def test_one_run_or_a_run_too_short_is_refused_with_its_name(
+    urdf: RobotModel, tmp_path: Path
+) -> None:
+    recs = runs(urdf, urdf.joint_names)
+    with pytest.raises(ConfigError, match="at least two runs"):
+        RobotProblem(urdf, recs[:1])
+    short = recs[0]
+    cut = JointRecording("stub", short.stamps_ns[:100], short.joints, short.position[:100],
+                         short.velocity[:100], short.torque[:100])  # fmt: skip
+    with pytest.raises(ConfigError, match="stub: too short"):
+        RobotProblem(urdf, [cut, recs[1]])
+
+
+SHARED = Path(__file__).resolve().parents[1] / "data" / "double_pendulum"  # the lab's files
+
+
+def test_the_command_line_reads_the_real_double_pendulum_and_prints_strict_json(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two real runs (one held out): every finding names its effect, its URDF joint (or none
+    for the whole robot) and its parameters, and the held-out torque residual per joint is
+    reported before and after; what is named lowers it."""
+    runs_ = [str(SHARED / f"pendubot_clean_0{k}.csv.xz") for k in (1, 2)]
+    assert main(["discrepancy", *runs_, "--urdf", str(SHARED / "pendubot.urdf"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out, parse_constant=pytest.fail)
+    assert out["split"]["heldout"] == ["pendubot_clean_02"]
+    assert out["findings"], "the URDF's model misses much of the real robot (docs/robots.md)"
+    for f in out["findings"]:
+        assert f["joint"] in (None, "Joint1", "Joint2")
+        assert f["heldout_rmse_after"] < f["heldout_rmse_before"]
+        assert set(f["parameters"]) >= set(f["confidence_interval"])
+    rms = out["heldout_rms_nm"]
+    assert set(rms) == {"Joint1", "Joint2"}
+    assert all(after < before for before, after in rms.values())
+
+
+def test_the_command_line_refuses_another_robots_urdf_with_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = str(SHARED / "pendubot_clean_01.csv.xz")
+    urdf = tmp_path / "chain3.urdf"
+    urdf.write_text(chain_urdf(3))
+    assert main(["discrepancy", run, run, "--urdf", str(urdf)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pendubot_clean_01" in err[0] and "pos_meas3" in err[0]

@@ -1,0 +1,276 @@
+"""Candidate effects on a robot (issue 27), each acting where its physics acts: on the command
+path before the joint (``command_delay`` of the whole robot, a joint's ``torque_gain`` and
+``torque_saturation``), or as a torque the joint's model leaves out (``torque_offset``,
+``coulomb_friction``, ``viscous_friction``, a link's ``payload`` and ``parameter_drift``).
+
+Every effect but the delay belongs to one joint (or the link that joint moves) and is named
+``kind[joint]``: the discovery loop (:mod:`discover`) treats effects of one name as variants of
+one another, and a joint's gain is not a variant of another joint's. ``kind`` and ``joint`` are
+what the JSON reports (``joint`` None: the whole robot).
+
+The problem (:class:`~transparency_ros.analysis.discrepancy.robot.RobotProblem`) hands each
+effect a :class:`Context` of one run: the command on a wide grid before smoothing, the joints'
+state on the compared grid, the torque regressor and the nominal parameters.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from transparency_ros.analysis.discrepancy.effects import pinned
+from transparency_ros.analysis.discrepancy.model import FloatArray
+
+MOST_DELAY_S = 0.03  # a command acting up to this late
+GAIN_RANGE = (0.2, 5.0)  # a torque constant this far off at most
+PAYLOAD_MOST_KG = 20.0
+COM_MOST_M = 2.0
+
+
+@dataclass
+class Context:
+    """What an effect may change in one run's torque balance."""
+
+    v: FloatArray  # (samples, joints) joint speeds on the compared grid
+    sliding: FloatArray  # (samples, joints) the Coulomb law's tanh(q' / eps), smoothed
+    regressor: FloatArray  # (samples, joints, 10 * links): tau = Y pi
+    nominal: FloatArray  # (10 * links,) the nominal inertial parameters
+
+
+class RobotEffect:
+    """One candidate: ``kind`` on ``joint`` (an index into the model's joints; None: the whole
+    robot), parameters in SI units with bounds and the value that means no effect (``null``;
+    NaN: any value). ``stage`` says where it acts: ``delay`` (when the command acts),
+    ``command`` (what reaches the joint, per joint, before the smoothing the balance shares)
+    or ``torque`` (added to the model's side of the balance)."""
+
+    stage = "torque"
+    fittable = True
+    discrete_choices = 0
+
+    def __init__(
+        self,
+        kind: str,
+        joint: int | None,
+        joint_name: str | None,
+        *,
+        param_names: tuple[str, ...],
+        lower: tuple[float, ...],
+        upper: tuple[float, ...],
+        null: tuple[float, ...],
+        start: tuple[float, ...],
+    ) -> None:
+        self.kind = kind
+        self.joint = joint
+        self.joint_name = joint_name
+        self.name = kind if joint_name is None else f"{kind}[{joint_name}]"
+        self.param_names = param_names
+        self.lower = lower
+        self.upper = upper
+        self.null = null
+        self.start = np.array(start, dtype=float)
+
+    def meaningful(self, p: FloatArray) -> bool:
+        """A fit held at a bound of its range stands in for something it cannot be (the
+        ranges of signed terms are symmetric: their sizes are checked)."""
+        return not pinned(np.abs(p), self.lower, self.upper)
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        return {}
+
+    def delay(self, p: FloatArray) -> float:
+        return 0.0
+
+    def command(self, tau: FloatArray, p: FloatArray) -> FloatArray:
+        """The torque reaching the joints, (samples, joints), from the command ``tau``."""
+        return tau
+
+    def torque(self, ctx: Context, p: FloatArray) -> FloatArray | None:
+        """The torque the model leaves out, (samples, joints); None: none."""
+        return None
+
+
+class CommandDelay(RobotEffect):
+    """The motors act on the command ``delay_s`` late (the current loop, the bus)."""
+
+    stage = "delay"
+
+    def __init__(self) -> None:
+        super().__init__("command_delay", None, None, **_spec(
+            ("delay_s",), (0.0,), (MOST_DELAY_S,), (0.0,), (0.005,)))  # fmt: skip
+
+    def delay(self, p: FloatArray) -> float:
+        return float(p[0])
+
+
+def _spec(*values: tuple[Any, ...]) -> dict[str, Any]:
+    """RobotEffect's keywords from (names, lower, upper, null, start) in that order."""
+    return dict(zip(("param_names", "lower", "upper", "null", "start"), values, strict=True))
+
+
+class _JointEffect(RobotEffect):
+    def __init__(self, kind: str, joint: int, name: str, *spec: tuple[Any, ...]) -> None:
+        super().__init__(kind, joint, name, **_spec(*spec))
+        self.index = joint  # (``joint`` narrowed: every joint effect has one)
+
+    def _one(self, ctx: Context, column: FloatArray) -> FloatArray:
+        out = np.zeros(ctx.v.shape)
+        out[:, self.index] = column
+        return out
+
+
+class TorqueGain(_JointEffect):
+    """The joint's torque is ``gain`` times its command (a torque constant or gear ratio off)."""
+
+    stage = "command"
+
+    def __init__(self, joint: int, name: str) -> None:
+        super().__init__(
+            "torque_gain",
+            joint,
+            name,
+            ("gain",),
+            (GAIN_RANGE[0],),
+            (GAIN_RANGE[1],),
+            (1.0,),
+            (1.0,),
+        )
+
+    def command(self, tau: FloatArray, p: FloatArray) -> FloatArray:
+        out = tau.copy()
+        out[:, self.index] *= p[0]
+        return out
+
+
+class TorqueSaturation(_JointEffect):
+    """The joint's torque falls off smoothly towards ``limit_nm``: L tanh(command / L)."""
+
+    stage = "command"
+
+    def __init__(self, joint: int, name: str, largest_nm: float) -> None:
+        top = max(largest_nm, 1e-6)
+        super().__init__(
+            "torque_saturation", joint, name, ("limit_nm",), (0.05 * top,), (3.0 * top,),
+            (math.inf,), (top,),
+        )  # fmt: skip
+
+    def command(self, tau: FloatArray, p: FloatArray) -> FloatArray:
+        out = tau.copy()
+        limit = float(p[0])
+        out[:, self.index] = limit * np.tanh(tau[:, self.index] / limit)
+        return out
+
+    def meaningful(self, p: FloatArray) -> bool:
+        # held at the top of its range it is no saturation the recording shows
+        return bool(p[0] < 0.99 * self.upper[0]) and super().meaningful(p)
+
+
+class TorqueOffset(_JointEffect):
+    def __init__(self, joint: int, name: str, largest_nm: float) -> None:
+        top = max(largest_nm, 1e-6)
+        super().__init__(
+            "torque_offset", joint, name, ("offset_nm",), (-top,), (top,), (0.0,), (0.0,)
+        )
+
+    def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
+        return self._one(ctx, np.full(ctx.v.shape[0], float(p[0])))
+
+
+class CoulombFriction(_JointEffect):
+    """Coulomb friction the model leaves out (negative: the model has too much)."""
+
+    def __init__(self, joint: int, name: str, largest_nm: float) -> None:
+        top = max(largest_nm, 1e-6)
+        super().__init__(
+            "coulomb_friction", joint, name, ("coulomb_nm",), (-top,), (top,), (0.0,), (0.0,)
+        )
+
+    def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
+        return self._one(ctx, float(p[0]) * ctx.sliding[:, self.index])
+
+
+class ViscousFriction(_JointEffect):
+    """Viscous friction the model leaves out (negative: the model has too much)."""
+
+    def __init__(self, joint: int, name: str, most: float) -> None:
+        top = max(most, 1e-6)
+        super().__init__(
+            "viscous_friction",
+            joint,
+            name,
+            ("viscous_nms_per_rad",),
+            (-top,),
+            (top,),
+            (0.0,),
+            (0.0,),
+        )
+
+    def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
+        return self._one(ctx, float(p[0]) * ctx.v[:, self.index])
+
+
+class Payload(_JointEffect):
+    """A point mass ``mass_kg`` fixed to the link the joint moves, at ``com_*_m`` in the link's
+    frame: its weight and inertia through the link's regressor columns."""
+
+    def __init__(self, joint: int, name: str) -> None:
+        super().__init__(
+            "payload", joint, name, ("mass_kg", "com_x_m", "com_y_m", "com_z_m"),
+            (0.0, -COM_MOST_M, -COM_MOST_M, -COM_MOST_M),
+            (PAYLOAD_MOST_KG, COM_MOST_M, COM_MOST_M, COM_MOST_M),
+            (0.0, math.nan, math.nan, math.nan), (0.1, 0.0, 0.0, 0.0),
+        )  # fmt: skip
+
+    def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
+        m, c = float(p[0]), np.asarray(p[1:4], dtype=float)
+        r2 = float(c @ c)
+        # a point mass's 10 parameters: m, m c, and its inertia about the link's origin
+        # (Pinocchio's order Ixx, Ixy, Iyy, Ixz, Iyz, Izz)
+        inertia = m * (r2 * np.eye(3) - np.outer(c, c))
+        pi = np.r_[m, m * c, inertia[0, 0], inertia[0, 1], inertia[1, 1], inertia[0, 2],
+                   inertia[1, 2], inertia[2, 2]]  # fmt: skip
+        k = 10 * self.index
+        return np.asarray(ctx.regressor[:, :, k : k + 10] @ pi, dtype=float)
+
+
+class ParameterDrift(_JointEffect):
+    """A term of the link's inertial parameters is ``scale`` times the model's: its mass and
+    first moments together (``mass_scale``: its weight, as a payload spread like the link),
+    or its rotational inertia about the joint's frame (``inertia_scale``: a URDF giving
+    inertias about the wrong point). Both are named ``parameter_drift[joint]``, variants."""
+
+    TERMS: ClassVar[dict[str, slice]] = {"mass_scale": slice(0, 4), "inertia_scale": slice(4, 10)}
+
+    def __init__(self, joint: int, name: str, term: str) -> None:
+        super().__init__("parameter_drift", joint, name, (term,), (0.2,), (5.0,), (1.0,), (1.0,))
+        self.term = self.TERMS[term]
+
+    def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
+        k = 10 * self.index
+        part = ctx.regressor[:, :, k : k + 10][:, :, self.term] @ ctx.nominal[k : k + 10][self.term]
+        return np.asarray((float(p[0]) - 1.0) * part, dtype=float)
+
+
+def library(joints: tuple[str, ...], largest_nm: FloatArray, fastest: FloatArray) -> list[Any]:
+    """Every candidate for a robot with ``joints``, whose commands reach ``largest_nm`` and
+    speeds ``fastest`` [rad/s] (the bounds of the torques' sizes)."""
+    out: list[Any] = [CommandDelay()]
+    for j, name in enumerate(joints):
+        top = float(largest_nm[j])
+        out += [
+            TorqueGain(j, name),
+            TorqueSaturation(j, name, top),
+            TorqueOffset(j, name, top),
+            CoulombFriction(j, name, top),
+            ViscousFriction(j, name, top / max(float(fastest[j]), 1e-3)),
+            Payload(j, name),
+            ParameterDrift(j, name, "mass_scale"),
+            ParameterDrift(j, name, "inertia_scale"),
+        ]
+    return out
+
+
+__all__ = ["Context", "RobotEffect", "library"]
