@@ -129,3 +129,22 @@ def test_the_command_line_refuses_another_robots_urdf_with_one_line(
     assert main(["discrepancy", run, run, "--urdf", str(urdf)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "pendubot_clean_01" in err[0] and "pos_meas3" in err[0]
+
+
+def test_a_joints_own_effect_is_judged_on_its_own_row_and_a_links_on_the_rows_above_it(
+    urdf: RobotModel,
+) -> None:
+    """A gain or friction of one joint changes that joint's row of the balance only, so it is
+    judged there; a payload on the first link acts on the first joint's row alone, one on the
+    last link on every row (all of the error: no scope), as does the command delay."""
+    problem = RobotProblem(urdf, runs(urdf, urdf.joint_names))
+    cand = {c.name: c for c in problem.candidates()}
+    joints = np.tile([0, 1], problem.error([], [], True).size // 2)
+    for name, row in (("torque_gain[j0]", 0), ("coulomb_friction[j1]", 1), ("payload[j0]", 0)):
+        scope = problem.sensor_scope([cand[name]])
+        assert scope is not None, name
+        mask, floor = scope
+        assert floor == 1.0
+        assert np.array_equal(mask, joints == row), name
+    for name in ("payload[j1]", "command_delay"):
+        assert problem.sensor_scope([cand[name]]) is None, name

@@ -250,6 +250,40 @@ class RobotProblem:
     def noise_floor(self) -> float:
         return 1.0
 
+    def sensor_scope(
+        self, effects: Sequence[Any], after_search: bool = False
+    ) -> tuple[npt.NDArray[np.bool_], float] | None:
+        """The held-out elements of the joints ``effects`` act on, on which they are judged:
+        a joint's own effect (its gain, friction, offset) changes its own row of the balance
+        only, a link's (payload, drift) the rows of the joint that moves it and of that
+        joint's ancestors; the command delay every row (None: all of the error). Judged on
+        all joints, an effect of one joint had to remove half of every joint's error."""
+        rows: set[int] = set()
+        for e in effects:
+            if e.joint is None:
+                return None
+            rows |= self._acting_rows(e)
+        if len(rows) == self.model.dof:
+            return None
+        mask = np.zeros(self.model.dof, dtype=bool)
+        mask[sorted(rows)] = True
+        return np.concatenate([np.tile(mask, run.t.size) for run in self.held_runs]), 1.0
+
+    def _acting_rows(self, effect: Any) -> set[int]:
+        if effect.stage == "command" or effect.kind in {
+            "torque_offset",
+            "coulomb_friction",
+            "viscous_friction",
+        }:
+            return {effect.joint}
+        # a link's inertia acts on the joint that moves it and on every joint above it
+        parents = self.model.pin_model.parents
+        rows, joint_id = set(), effect.joint + 1
+        while joint_id > 0:
+            rows.add(joint_id - 1)
+            joint_id = int(parents[joint_id])
+        return rows
+
     def phases(self) -> dict[str, npt.NDArray[np.bool_]]:
         """Per held-out element (sample, joint): held (|q'| < STUCK_RAD_S), turning back
         (within 3 compared points of a sign change of q'), slow or fast (below or above the
