@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -33,6 +34,7 @@ from transparency_ros.analysis.discrepancy.problem import Trace, position_noise,
 from transparency_ros.analysis.discrepancy.robot_effects import Context, library
 from transparency_ros.analysis.robot_data import JointRecording
 from transparency_ros.core.errors import ConfigError
+from transparency_ros.core.robot_calibration import effort_limit
 
 FloatArray = npt.NDArray[np.float64]
 GRID_S = 0.002  # the balance's grid
@@ -45,11 +47,16 @@ STUCK_RAD_S = 0.05  # a joint slower than this is held by its friction, or turni
 HELD_OUT_EVERY = 3  # every third run is held out (the second of two)
 
 
+@cache
+def _sections(cutoff_hz: float) -> FloatArray:
+    """The low-pass's second-order sections (designed once per cutoff)."""
+    return np.asarray(butter(FILTER_ORDER, cutoff_hz, fs=1.0 / GRID_S, output="sos"))
+
+
 def _low_pass(x: FloatArray, cutoff_hz: float = CUTOFF_HZ) -> FloatArray:
     """``x`` (samples along axis 0, on the grid) through a zero-phase low-pass: the
     balance's, or the states' wider one."""
-    sos = butter(FILTER_ORDER, cutoff_hz, fs=1.0 / GRID_S, output="sos")
-    return np.asarray(sosfiltfilt(sos, x, axis=0), dtype=float)
+    return np.asarray(sosfiltfilt(_sections(cutoff_hz), x, axis=0), dtype=float)
 
 
 def _noise_gain(derivative: int) -> float:
@@ -79,6 +86,8 @@ class _Run:
     command: FloatArray  # (recorded samples, joints), clipped at the effort limits
     wide: FloatArray  # the filter's grid: the compared grid with its margins [s]
     keep: npt.NDArray[np.int64]  # the compared points of that grid
+    applied: FloatArray  # the command, filtered, at the compared points (no effect)
+    nominal: FloatArray  # the URDF's side of the balance there
 
 
 class RobotProblem:
@@ -100,12 +109,12 @@ class RobotProblem:
         held = [i for i in range(len(runs)) if i % HELD_OUT_EVERY == HELD_OUT_EVERY - 1] or [
             len(runs) - 1
         ]
-        self.fit_runs = [self._prepare(r) for i, r in enumerate(runs) if i not in held]
-        self.held_runs = [self._prepare(r) for i, r in enumerate(runs) if i in held]
         pm = model.pin_model
         self.pi = np.concatenate(
             [pm.inertias[j].toDynamicParameters() for j in range(1, model.dof + 1)]
         )
+        self.fit_runs = [self._prepare(r) for i, r in enumerate(runs) if i not in held]
+        self.held_runs = [self._prepare(r) for i, r in enumerate(runs) if i in held]
         self.floor_nm = self._floors(runs)
         largest = np.max([np.max(np.abs(r.command), axis=0) for r in self.fit_runs], axis=0)
         fastest = np.max([np.max(np.abs(r.v), axis=0) for r in self.fit_runs], axis=0)
@@ -174,11 +183,16 @@ class RobotProblem:
         smoothing = self.model.friction.smoothing_rad_s
         sliding = _low_pass(np.tanh(v / smoothing))[keep]
         v = _low_pass(v)
-        limit = np.array(pm.effortLimit, dtype=float)
-        limit = np.where(limit > 0, limit, np.inf)
+        limit = effort_limit(self.model)
+        command = np.clip(rec.torque, -limit, limit)
+        # both sides as the URDF has them, made once: most candidates change neither the
+        # command's path nor the nominal terms (``balance`` adds to them)
+        applied = _low_pass(np.stack([np.interp(grid, t, c) for c in command.T], axis=1))[keep]
+        friction = self.model.friction
+        nominal = regressor @ self.pi + friction.viscous * v[keep] + friction.coulomb * sliding
         return _Run(
-            rec.name, grid[keep], q[keep], v[keep], regressor, sliding, t,
-            np.clip(rec.torque, -limit, limit), grid, keep,
+            rec.name, grid[keep], q[keep], v[keep], regressor, sliding, t, command, grid, keep,
+            applied, nominal,
         )  # fmt: skip
 
     def _floors(self, recordings: Sequence[JointRecording]) -> FloatArray:
@@ -211,15 +225,16 @@ class RobotProblem:
         """(applied torque, the model's torque) of ``run`` at its compared points, (samples,
         joints), with ``effects``."""
         delay = sum(e.delay(p) for e, p in zip(effects, params, strict=True))
-        tau = np.stack(
-            [np.interp(run.wide - delay, run.command_t, c) for c in run.command.T], axis=1
-        )
-        for e, p in zip(effects, params, strict=True):
-            if e.stage == "command":
+        path = [(e, p) for e, p in zip(effects, params, strict=True) if e.stage == "command"]
+        applied = run.applied
+        if delay != 0.0 or path:
+            tau = np.stack(
+                [np.interp(run.wide - delay, run.command_t, c) for c in run.command.T], axis=1
+            )
+            for e, p in path:
                 tau = e.command(tau, p)
-        applied = _low_pass(tau)[run.keep]
-        friction = self.model.friction
-        model = run.regressor @ self.pi + friction.viscous * run.v + friction.coulomb * run.sliding
+            applied = _low_pass(tau)[run.keep]
+        model = run.nominal
         ctx = Context(run.v, run.sliding, run.regressor, self.pi)
         for e, p in zip(effects, params, strict=True):
             extra = e.torque(ctx, p)
