@@ -70,11 +70,17 @@ def _subset(text: str, allowed: Sequence[str], what: str) -> list[str]:
     return [item for item in allowed if item in chosen]  # in table order
 
 
+Cells = dict[tuple[str, str], TrialRecord]
+
+
 def _run_cells(
     engine: str, setup: FeelCageSetup, actuators: list[str], balls: list[str]
-) -> tuple[dict[tuple[str, str], TrialRecord], dict[str, float], dict[str, float]]:
-    """Records per (ball, actuator), e_s per actuator, and (ros) the error noise per actuator."""
-    records: dict[tuple[str, str], TrialRecord] = {}
+) -> tuple[Cells, dict[tuple[str, str], float | None], dict[str, float], dict[str, float]]:
+    """Records per (ball, actuator), the time from the onset sample to the act torque on the
+    motor per (ball, actuator) (core: t_process), e_s per actuator, and (ros) the error noise
+    per actuator."""
+    records: Cells = {}
+    torque: dict[tuple[str, str], float | None] = {}
     e_s: dict[str, float] = {}
     noise: dict[str, float] = {}
     if engine == "core":
@@ -82,8 +88,9 @@ def _run_cells(
             sweep = steady_sweep(get_actuator(name), setup)
             e_s[name] = sweep.steady_error_rad
             for ball in balls:
-                records[(ball, name)] = simulate_cell(name, ball, setup, sweep)
-        return records, e_s, noise
+                records[(ball, name)] = record = simulate_cell(name, ball, setup, sweep)
+                torque[(ball, name)] = record.t_process_s
+        return records, torque, e_s, noise
     from transparency_ros.ros.feelcage_run import run_cell  # noqa: PLC0415 - needs rclpy
 
     total, done, rate = len(actuators) * len(balls), 0, float("inf")
@@ -94,18 +101,19 @@ def _run_cells(
                   flush=True)  # fmt: skip
             cell = run_cell(name, ball, setup)
             records[(ball, name)] = cell.record
+            torque[(ball, name)] = cell.t_torque_s
             e_s[name] = max(e_s.get(name, 0.0), cell.steady_error_rad)
             noise[name] = max(noise.get(name, 0.0), cell.error_noise_rad)
             rate = min(rate, cell.sample_rate_hz)
     print(f"lowest /estimated_effort rate while measuring e_s: {rate:.0f} Hz", file=sys.stderr)
-    return records, e_s, noise
+    return records, torque, e_s, noise
 
 
 def run(args: argparse.Namespace) -> int:
     setup = load_setup(args.config)
     actuators = _subset(args.actuators, ACTUATORS, "actuators")
     balls = _subset(args.balls, tuple(setup.balls), "balls")
-    results, e_s, noise = _run_cells(args.engine, setup, actuators, balls)
+    results, torque, e_s, noise = _run_cells(args.engine, setup, actuators, balls)
     to_cage = {name: time_to_cage(name, setup) for name in actuators}
     rows: list[dict[str, Any]] = []
     for ball in balls:
@@ -114,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
             rows.append({
                 "ball": ball, "actuator": actuator, "outcome": r.outcome.value,
                 "paper": PAPER_TABLE2.get(ball, ("?",) * 4)[ACTUATORS.index(actuator)],
-                "t_feel_s": r.t_feel_s, "t_process_s": r.t_process_s, "t_act_s": r.t_act_s,
+                "t_feel_s": r.t_feel_s, "t_process_s": r.t_process_s,
+                "t_torque_s": torque[(ball, actuator)], "t_act_s": r.t_act_s,
                 "t_total_s": r.t_total_s, "t_budget_s": r.t_budget_s,
                 "t_to_cage_s": to_cage[actuator],
             })  # fmt: skip
@@ -148,13 +157,14 @@ def run(args: argparse.Namespace) -> int:
         )
     print(f"\n{matches}/{len(rows)} cells as in the paper ((!) marks a difference)")
     print(
-        f"\n{'cell':<16} {'t_feel':>7} {'t_proc':>7} {'t_act':>7} {'t_total':>8} "
-        f"{'t_budget':>9} {'to cage':>8}  [ms]  (to cage: the act time the actuator needs)"
+        f"\n{'cell':<16} {'t_feel':>7} {'t_proc':>7} {'t_torque':>8} {'t_act':>7} {'t_total':>8} "
+        f"{'t_budget':>9} {'to cage':>8}  [ms]\n(t_torque: from the onset sample to the act torque "
+        "on the motor; to cage: the act time the actuator needs)"
     )
     for c in rows:
         print(
             f"{c['ball'] + '/' + c['actuator']:<16} {_ms(c['t_feel_s']):>7} "
-            f"{_ms(c['t_process_s']):>7} {_ms(c['t_act_s']):>7} {_ms(c['t_total_s']):>8} "
-            f"{_ms(c['t_budget_s']):>9} {_ms(c['t_to_cage_s']):>8}"
+            f"{_ms(c['t_process_s']):>7} {_ms(c['t_torque_s']):>8} {_ms(c['t_act_s']):>7} "
+            f"{_ms(c['t_total_s']):>8} {_ms(c['t_budget_s']):>9} {_ms(c['t_to_cage_s']):>8}"
         )
     return 0

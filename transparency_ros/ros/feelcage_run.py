@@ -37,6 +37,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from transparency_ros.core import feel_cage as fc
+from transparency_ros.core.cdr import decode_joint_state
 from transparency_ros.core.config import get_actuator
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.feel_cage_config import FeelCageSetup
@@ -67,6 +68,10 @@ class CellRun:
     steady_error_rad: float
     error_noise_rad: float  # std of the error over the measured revolution
     sample_rate_hz: float  # /estimated_effort samples received per second while measuring
+    # from the stamp of the sample that crossed the threshold to the first sample the motor was
+    # driven by the act torque (/joint_setpoints without a held position): t_process plus the
+    # command's trip behavior -> driver -> device; None if the behavior never acted
+    t_torque_s: float | None = None
 
 
 def _double(name: str, value: float) -> ParameterMsg:
@@ -215,6 +220,9 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
     )
     if not placed:
         raise FeelCageRunError("the arm never cleared the rail to place the ball")
+    # when the act torque reached the motor: raw bytes here, decoded after the trial
+    setpoints: list[bytes] = []
+    node.create_subscription(JointState, "/joint_setpoints", setpoints.append, 1000, raw=True)
     call(SetBool, "/feel_cage_behavior/arm", SetBool.Request(data=True))
 
     # 3. until caged/lost, or the ball left while the behavior still sweeps
@@ -240,7 +248,24 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
         state = fc.BehaviorState(
             fc.Phase.LOST, 0.0, 0.0, state.detected_s, state.act_start_s, state.done_s
         )
-    return CellRun(fc.record(state, contact_s, exit_s), e_s, noise, min(rates))
+    torque_s = _first_unheld_stamp(setpoints, state.detected_s)
+    t_torque = None if torque_s is None or state.detected_s is None else torque_s - state.detected_s
+    return CellRun(fc.record(state, contact_s, exit_s), e_s, noise, min(rates), t_torque)
+
+
+def _first_unheld_stamp(setpoints: list[bytes], after_s: float | None) -> float | None:
+    """The stamp of the first /joint_setpoints sample from ``after_s`` on whose motor was not
+    held at a position and driven by a torque (the act command: position NaN and a feed-forward
+    torque, messages.setpoint_of; a command timeout's damping has no feed-forward)."""
+    if after_s is None:
+        return None
+    for data in setpoints:
+        fields = decode_joint_state(data)
+        stamp_s = fields.stamp_s
+        unheld = fields.position and math.isnan(fields.position[0]) and fields.effort[0] != 0.0
+        if stamp_s >= after_s and unheld:
+            return stamp_s
+    return None
 
 
 def _behavior_state(status: DiagnosticStatus | None) -> fc.BehaviorState:
