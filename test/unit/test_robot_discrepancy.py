@@ -41,6 +41,19 @@ class _Gained:
         return self.model.forward_dynamics(q, v, tau)
 
 
+class _Cogged(_Gained):
+    """The chain whose motor on ``joint`` ripples: A sin(N q + phi) against its command."""
+
+    def __init__(self, model: RobotModel, joint: int, amplitude: float, cycles: int) -> None:
+        super().__init__(model, joint, 1.0)
+        self.amplitude, self.cycles = amplitude, cycles
+
+    def forward_dynamics(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        tau = tau.copy()
+        tau[self.joint] -= self.amplitude * math.sin(self.cycles * q[self.joint] + 0.4)
+        return self.model.forward_dynamics(q, v, tau)
+
+
 def runs(truth: object, names: tuple[str, ...], *, delay_steps: int = 0) -> list[JointRecording]:
     """Three 4 s runs at 1 kHz, positions read through a 14-bit encoder."""
     out = []
@@ -77,6 +90,19 @@ def test_motors_acting_late_are_named_as_the_command_delay(urdf: RobotModel) -> 
     named = found(RobotProblem(urdf, runs(urdf, urdf.joint_names, delay_steps=4)))
     assert set(named) == {"command_delay"}
     assert named["command_delay"]["delay_s"] == pytest.approx(0.0045, abs=0.0005)
+
+
+def test_a_motors_cogging_is_named_with_its_period_and_size(urdf: RobotModel) -> None:
+    names = urdf.joint_names
+    named = found(RobotProblem(urdf, runs(_Cogged(urdf, 0, 0.3, 8), names)))
+    # (the simulation holds each command over its 1 ms step: a real 0.5 ms delay, which the
+    # faithful chain's error is too small to show and this one's may)
+    assert set(named) - {"command_delay"} == {f"cogging[{names[0]}]"}, named
+    if "command_delay" in named:
+        assert named["command_delay"]["delay_s"] == pytest.approx(0.0005, abs=0.0002)
+    cogging = named[f"cogging[{names[0]}]"]
+    assert cogging["periods_per_rev"] == 8
+    assert cogging["amplitude_nm"] == pytest.approx(0.3, rel=0.1)
 
 
 def test_a_robot_its_urdf_describes_gets_nothing_named(urdf: RobotModel) -> None:

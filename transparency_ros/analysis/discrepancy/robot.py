@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
 
@@ -88,6 +88,8 @@ class _Run:
     keep: npt.NDArray[np.int64]  # the compared points of that grid
     applied: FloatArray  # the command, filtered, at the compared points (no effect)
     nominal: FloatArray  # the URDF's side of the balance there
+    q_wide: FloatArray  # (grid, joints) the positions on the filter's grid (low-passed wide)
+    waves: dict[tuple[int, int], FloatArray] = field(default_factory=dict)  # Context.wave's
 
 
 class RobotProblem:
@@ -116,7 +118,12 @@ class RobotProblem:
         self.fit_runs = [self._prepare(r) for i, r in enumerate(runs) if i not in held]
         self.held_runs = [self._prepare(r) for i, r in enumerate(runs) if i in held]
         self.floor_nm = self._floors(runs)
-        largest = np.max([np.max(np.abs(r.command), axis=0) for r in self.fit_runs], axis=0)
+        # the torques' sizes per joint: the command's, or the model's where the joint is
+        # passive (a pendubot's elbow: its command is zero, its friction is not)
+        largest = np.max(
+            [np.maximum(np.max(np.abs(r.command), axis=0), np.max(np.abs(r.nominal), axis=0))
+             for r in self.fit_runs], axis=0,
+        )  # fmt: skip
         fastest = np.max([np.max(np.abs(r.v), axis=0) for r in self.fit_runs], axis=0)
         self._candidates = library(tuple(model.joint_names), largest, fastest)
         self.min_improvement = 0.5  # as the torque-driven 1-DoF problem's
@@ -192,7 +199,7 @@ class RobotProblem:
         nominal = regressor @ self.pi + friction.viscous * v[keep] + friction.coulomb * sliding
         return _Run(
             rec.name, grid[keep], q[keep], v[keep], regressor, sliding, t, command, grid, keep,
-            applied, nominal,
+            applied, nominal, q,
         )  # fmt: skip
 
     def _floors(self, recordings: Sequence[JointRecording]) -> FloatArray:
@@ -217,7 +224,25 @@ class RobotProblem:
         return list(self._candidates)
 
     def initial(self, effect: Any) -> FloatArray:
+        if hasattr(effect, "choose"):  # a cogging's period, from the URDF's residual
+            j = effect.index
+            residual = np.concatenate([r.applied[:, j] - r.nominal[:, j] for r in self.fit_runs])
+            start = effect.choose(
+                lambda n: np.concatenate([self._wave(r, j, n) for r in self.fit_runs]), residual
+            )
+            return np.asarray(np.clip(start, effect.lower, effect.upper), dtype=float)
         return np.asarray(np.clip(effect.start, effect.lower, effect.upper), dtype=float)
+
+    @staticmethod
+    def _wave(run: _Run, joint: int, cycles: int) -> FloatArray:
+        """sin and cos of ``cycles`` times the joint's position, (compared points, 2), made on
+        the full grid and low-passed as the balance is (once per run, joint and period)."""
+        key = (joint, cycles)
+        if key not in run.waves:
+            phase = cycles * run.q_wide[:, joint]
+            both = np.stack([np.sin(phase), np.cos(phase)], axis=1)
+            run.waves[key] = _low_pass(both)[run.keep]
+        return run.waves[key]
 
     def balance(
         self, run: _Run, effects: Sequence[Any], params: Sequence[FloatArray]
@@ -235,7 +260,9 @@ class RobotProblem:
                 tau = e.command(tau, p)
             applied = _low_pass(tau)[run.keep]
         model = run.nominal
-        ctx = Context(run.v, run.sliding, run.regressor, self.pi)
+        ctx = Context(
+            run.v, run.sliding, run.regressor, self.pi, lambda j, n: self._wave(run, j, n)
+        )
         for e, p in zip(effects, params, strict=True):
             extra = e.torque(ctx, p)
             if extra is not None:
@@ -289,6 +316,7 @@ class RobotProblem:
             "torque_offset",
             "coulomb_friction",
             "viscous_friction",
+            "cogging",
         }:
             return {effect.joint}
         # a link's inertia acts on the joint that moves it and on every joint above it

@@ -1,7 +1,10 @@
 """Candidate effects on a robot (issue 27), each acting where its physics acts: on the command
 path before the joint (``command_delay`` of the whole robot, a joint's ``torque_gain`` and
 ``torque_saturation``), or as a torque the joint's model leaves out (``torque_offset``,
-``coulomb_friction``, ``viscous_friction``, a link's ``payload`` and ``parameter_drift``).
+``coulomb_friction``, ``viscous_friction``, ``cogging``, a link's ``payload`` and
+``parameter_drift``). ``sensor_delay`` (the positions recorded late) shifts the two sides of the
+balance against each other exactly as ``command_delay`` does: the balance cannot tell them apart,
+and the report says so (explained alike).
 
 Every effect but the delay belongs to one joint (or the link that joint moves) and is named
 ``kind[joint]``: the discovery loop (:mod:`discover`) treats effects of one name as variants of
@@ -16,6 +19,7 @@ state on the compared grid, the torque regressor and the nominal parameters.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -38,6 +42,9 @@ class Context:
     sliding: FloatArray  # (samples, joints) the Coulomb law's tanh(q' / eps), smoothed
     regressor: FloatArray  # (samples, joints, 10 * links): tau = Y pi
     nominal: FloatArray  # (10 * links,) the nominal inertial parameters
+    # (joint, cycles per revolution) -> (samples, 2): sin and cos of cycles * q of the joint,
+    # computed on the full grid and low-passed as the balance is
+    wave: Callable[[int, int], FloatArray]
 
 
 class RobotEffect:
@@ -104,6 +111,17 @@ class CommandDelay(RobotEffect):
 
     def delay(self, p: FloatArray) -> float:
         return float(p[0])
+
+
+class SensorDelay(CommandDelay):
+    """The positions are recorded ``delay_s`` late (an encoder's filter, the bus). In the
+    torque balance this is the command delay's shift exactly (the states compared with the
+    command ``delay_s`` earlier), kept as its own candidate so that a finding of either names
+    the other as explained alike."""
+
+    def __init__(self) -> None:
+        RobotEffect.__init__(self, "sensor_delay", None, None, **_spec(
+            ("delay_s",), (0.0,), (MOST_DELAY_S,), (0.0,), (0.005,)))  # fmt: skip
 
 
 def _spec(*values: tuple[Any, ...]) -> dict[str, Any]:
@@ -212,6 +230,47 @@ class ViscousFriction(_JointEffect):
         return self._one(ctx, float(p[0]) * ctx.v[:, self.index])
 
 
+class Cogging(_JointEffect):
+    """A torque ripple A sin(N q + phi) of the joint's motor, N cycles per revolution of the
+    joint (picked from the fit runs' residual of the joint's row, ``choose``)."""
+
+    LEAST_CYCLES, MOST_CYCLES = 2, 60  # N = 1 is a payload's weight
+
+    def __init__(self, joint: int, name: str, largest_nm: float) -> None:
+        top = max(largest_nm, 1e-6)
+        super().__init__(
+            "cogging", joint, name, ("amplitude_nm", "phase_rad"), (0.0, -math.pi),
+            (top, math.pi), (0.0, math.nan), (0.0, 0.0),
+        )  # fmt: skip
+        self.cycles_per_rev = self.LEAST_CYCLES
+
+    def extra_parameters(self, p: FloatArray) -> dict[str, float]:
+        return {"periods_per_rev": float(self.cycles_per_rev)}
+
+    def choose(self, waves: Callable[[int], FloatArray], residual: FloatArray) -> FloatArray:
+        """Pick N where sin / cos of N q explain most of ``residual`` (the joint's row,
+        stacked over the fit runs; ``waves(N)`` stacks the waves alike); the start there."""
+        best = (-1.0, self.LEAST_CYCLES, 0.0, 0.0)
+        for n in range(self.LEAST_CYCLES, self.MOST_CYCLES + 1):
+            basis = waves(n)
+            (a, b), *_ = np.linalg.lstsq(basis, residual, rcond=None)
+            explained = float(np.sum((basis @ np.array([a, b])) ** 2))
+            if explained > best[0]:
+                best = (explained, n, math.hypot(a, b), math.atan2(b, a))
+        self.cycles_per_rev = best[1]
+        return np.array([min(best[2], self.upper[0]), best[3]])
+
+    def meaningful(self, p: FloatArray) -> bool:
+        # the phase has no bound that means anything: only the amplitude is checked
+        return not pinned(np.abs(p[:1]), self.lower[:1], self.upper[:1])
+
+    def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
+        # A sin(N q + phi) = A cos(phi) sin(N q) + A sin(phi) cos(N q)
+        w = ctx.wave(self.index, self.cycles_per_rev)
+        amplitude, phase = float(p[0]), float(p[1])
+        return self._one(ctx, amplitude * (math.cos(phase) * w[:, 0] + math.sin(phase) * w[:, 1]))
+
+
 class Payload(_JointEffect):
     """A point mass ``mass_kg`` fixed to the link the joint moves, at ``com_*_m`` in the link's
     frame: its weight and inertia through the link's regressor columns."""
@@ -255,9 +314,9 @@ class ParameterDrift(_JointEffect):
 
 
 def library(joints: tuple[str, ...], largest_nm: FloatArray, fastest: FloatArray) -> list[Any]:
-    """Every candidate for a robot with ``joints``, whose commands reach ``largest_nm`` and
-    speeds ``fastest`` [rad/s] (the bounds of the torques' sizes)."""
-    out: list[Any] = [CommandDelay()]
+    """Every candidate for a robot with ``joints``, whose torques (command or model) reach
+    ``largest_nm`` and speeds ``fastest`` [rad/s] (the bounds of the torques' sizes)."""
+    out: list[Any] = [CommandDelay(), SensorDelay()]
     for j, name in enumerate(joints):
         top = float(largest_nm[j])
         out += [
@@ -266,6 +325,7 @@ def library(joints: tuple[str, ...], largest_nm: FloatArray, fastest: FloatArray
             TorqueOffset(j, name, top),
             CoulombFriction(j, name, top),
             ViscousFriction(j, name, top / max(float(fastest[j]), 1e-3)),
+            Cogging(j, name, top),
             Payload(j, name),
             ParameterDrift(j, name, "mass_scale"),
             ParameterDrift(j, name, "inertia_scale"),
