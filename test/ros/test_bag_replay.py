@@ -87,3 +87,19 @@ def test_a_bad_bag_is_a_clear_error() -> None:
     done = subprocess.run([EXE, str(BAG), "--rate", "0"], capture_output=True, text=True,
                           timeout=30, check=False)  # fmt: skip
     assert done.returncode == 2 and "--rate must be > 0" in done.stderr
+
+
+def test_a_teardown_that_hangs_ends_the_process_with_its_status() -> None:
+    """The bound on the teardown (once a replay printed its count and never exited): a process
+    held up by a thread that does not end is ended with the replay's status and a warning."""
+    script = (
+        "import threading, time\n"
+        "from transparency_ros.ros import bag_replay\n"
+        "bag_replay.TEARDOWN_S = 0.5\n"
+        "bag_replay._bound_teardown(3)\n"
+        "threading.Thread(target=time.sleep, args=(60,)).start()  # holds the exit up\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=30, check=False)  # fmt: skip
+    assert done.returncode == 3
+    assert "bag_replay: warning: the ROS teardown did not end" in done.stderr, done.stderr
