@@ -87,9 +87,12 @@ def test_a_joint_whose_motor_applies_less_than_its_command_is_named_with_its_gai
 
 def test_motors_acting_late_are_named_as_the_command_delay(urdf: RobotModel) -> None:
     # (4 steps of 1 ms, and the simulation holds each command over its step: 4.5 ms)
-    named = found(RobotProblem(urdf, runs(urdf, urdf.joint_names, delay_steps=4)))
+    report = Discoverer(RobotProblem(urdf, runs(urdf, urdf.joint_names, delay_steps=4))).run()
+    named = {f.effect: f for f in report.findings}
     assert set(named) == {"command_delay"}
-    assert named["command_delay"]["delay_s"] == pytest.approx(0.0045, abs=0.0005)
+    assert named["command_delay"].parameters["delay_s"] == pytest.approx(0.0045, abs=0.0005)
+    # positions recorded late shift the balance exactly so: the report says it cannot tell
+    assert "sensor_delay" in named["command_delay"].alternatives
 
 
 def test_a_motors_cogging_is_named_with_its_period_and_size(urdf: RobotModel) -> None:
