@@ -217,9 +217,8 @@ def main() -> int:
     tables = [(p.name.removesuffix(".csv.xz"), *_read(p)) for p in runs]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        base_paths = [p for p in runs]
         print(f"baseline: {len(runs)} unchanged runs ...", file=sys.stderr, flush=True)
-        base, base_s = _run_tool(base_paths)
+        base, base_s = _run_tool(runs)
         for case in chosen:
             directory = Path(tmp) / case.name
             directory.mkdir()

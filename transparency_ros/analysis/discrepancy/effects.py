@@ -10,7 +10,7 @@ the inverse-dynamics residual of the recorded data, so fits start near the answe
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -108,6 +108,22 @@ class TorqueOffset(Effect):
         return not pinned(np.abs(p), self.lower, self.upper)
 
 
+def strongest_wave(
+    waves: Callable[[int], FloatArray], residual: FloatArray
+) -> tuple[int, float, float]:
+    """(N, amplitude, phase) of the wave a sin + b cos of N q (``waves(N)``: its two columns
+    alike ``residual``'s samples) that explains most of ``residual``, N from 2 to 60 (N = 1
+    is a payload's gravity, not cogging). Shared by the 1-DoF and the robot cogging."""
+    best = (0.0, 2, 0.0, 0.0)
+    for n in range(2, 61):
+        basis = waves(n)
+        (a, b), *_ = np.linalg.lstsq(basis, residual, rcond=None)
+        explained = float(np.sum((basis @ np.array([a, b])) ** 2))
+        if explained > best[0]:
+            best = (explained, n, math.hypot(a, b), math.atan2(b, a))
+    return best[1], best[2], best[3]
+
+
 class Cogging(Effect):
     """tau = A sin(N q + phi), N (cycles per output revolution) picked from the residual."""
 
@@ -123,15 +139,9 @@ class Cogging(Effect):
 
     def initial(self, model: NominalModel, trials: Sequence[Trial]) -> FloatArray:
         q, _, r = inverse_dynamics_residual(model, trials)
-        best = (0.0, 2, 0.0, 0.0)
-        for n in range(2, 61):  # N = 1 is a payload's gravity, not cogging
-            basis = np.c_[np.sin(n * q), np.cos(n * q)]
-            (a, b), *_ = np.linalg.lstsq(basis, r, rcond=None)
-            explained = float(np.sum((basis @ np.array([a, b])) ** 2))
-            if explained > best[0]:
-                best = (explained, n, math.hypot(a, b), math.atan2(b, a))
-        self.cycles_per_rev = best[1]  # the period is chosen here, from the data
-        return np.array([min(best[2], 5.0), best[3]])
+        n, amplitude, phase = strongest_wave(lambda k: np.c_[np.sin(k * q), np.cos(k * q)], r)
+        self.cycles_per_rev = n  # the period is chosen here, from the data
+        return np.array([min(amplitude, 5.0), phase])
 
     def torque(self, q: FloatArray, qd: FloatArray, p: FloatArray) -> FloatArray:
         return np.asarray(p[0] * np.sin(self.cycles_per_rev * q + p[1]), dtype=float)

@@ -126,6 +126,7 @@ class RobotProblem:
         )  # fmt: skip
         fastest = np.max([np.max(np.abs(r.v), axis=0) for r in self.fit_runs], axis=0)
         self._candidates = library(tuple(model.joint_names), largest, fastest)
+        self._chosen: dict[int, FloatArray] = {}  # a cogging's start, by candidate (``initial``)
         self.min_improvement = 0.5  # as the torque-driven 1-DoF problem's
         self.nominal = {
             f"{kind}[{name}]": float(value)
@@ -224,12 +225,17 @@ class RobotProblem:
         return list(self._candidates)
 
     def initial(self, effect: Any) -> FloatArray:
-        if hasattr(effect, "choose"):  # a cogging's period, from the URDF's residual
-            j = effect.index
-            residual = np.concatenate([r.applied[:, j] - r.nominal[:, j] for r in self.fit_runs])
-            start = effect.choose(
-                lambda n: np.concatenate([self._wave(r, j, n) for r in self.fit_runs]), residual
-            )
+        if hasattr(effect, "choose"):  # a cogging's period, from the URDF's residual: once
+            if id(effect) not in self._chosen:
+                j = effect.index
+                residual = np.concatenate(
+                    [r.applied[:, j] - r.nominal[:, j] for r in self.fit_runs]
+                )
+                self._chosen[id(effect)] = effect.choose(
+                    lambda n: np.concatenate([self._wave(r, j, n) for r in self.fit_runs]),
+                    residual,
+                )
+            start = self._chosen[id(effect)]
             return np.asarray(np.clip(start, effect.lower, effect.upper), dtype=float)
         return np.asarray(np.clip(effect.start, effect.lower, effect.upper), dtype=float)
 

@@ -25,7 +25,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from transparency_ros.analysis.discrepancy.effects import pinned
+from transparency_ros.analysis.discrepancy.effects import pinned, strongest_wave
 from transparency_ros.analysis.discrepancy.model import FloatArray
 
 MOST_DELAY_S = 0.03  # a command acting up to this late
@@ -105,27 +105,23 @@ class CommandDelay(RobotEffect):
     before its stamp, i.e. the command's stamps are late against the positions' (a recorder
     that stamps on publishing, two clocks). The real pendubot's balance is closest at about
     -6 ms against its URDF: a delay concealed in it shows as a shift from there, so the range
-    is signed."""
+    is signed.
+
+    ``kind="sensor_delay"`` (0 to 30 ms): the positions are recorded late (an encoder's filter,
+    the bus). In the torque balance that is this shift exactly (the states compared with the
+    command ``delay_s`` earlier); it is its own candidate so that a finding of either names
+    the other as explained alike."""
 
     stage = "delay"
 
-    def __init__(self) -> None:
-        super().__init__("command_delay", None, None, **_spec(
-            ("delay_s",), (-MOST_DELAY_S,), (MOST_DELAY_S,), (0.0,), (0.0,)))  # fmt: skip
+    def __init__(self, kind: str = "command_delay") -> None:
+        signed = kind == "command_delay"
+        super().__init__(kind, None, None, **_spec(
+            ("delay_s",), (-MOST_DELAY_S if signed else 0.0,), (MOST_DELAY_S,), (0.0,),
+            (0.0 if signed else 0.005,)))  # fmt: skip
 
     def delay(self, p: FloatArray) -> float:
         return float(p[0])
-
-
-class SensorDelay(CommandDelay):
-    """The positions are recorded ``delay_s`` late (an encoder's filter, the bus). In the
-    torque balance this is the command delay's shift exactly (the states compared with the
-    command ``delay_s`` earlier), kept as its own candidate so that a finding of either names
-    the other as explained alike."""
-
-    def __init__(self) -> None:
-        RobotEffect.__init__(self, "sensor_delay", None, None, **_spec(
-            ("delay_s",), (0.0,), (MOST_DELAY_S,), (0.0,), (0.005,)))  # fmt: skip
 
 
 def _spec(*values: tuple[Any, ...]) -> dict[str, Any]:
@@ -238,15 +234,13 @@ class Cogging(_JointEffect):
     """A torque ripple A sin(N q + phi) of the joint's motor, N cycles per revolution of the
     joint (picked from the fit runs' residual of the joint's row, ``choose``)."""
 
-    LEAST_CYCLES, MOST_CYCLES = 2, 60  # N = 1 is a payload's weight
-
     def __init__(self, joint: int, name: str, largest_nm: float) -> None:
         top = max(largest_nm, 1e-6)
         super().__init__(
             "cogging", joint, name, ("amplitude_nm", "phase_rad"), (0.0, -math.pi),
             (top, math.pi), (0.0, math.nan), (0.0, 0.0),
         )  # fmt: skip
-        self.cycles_per_rev = self.LEAST_CYCLES
+        self.cycles_per_rev = 2  # until ``choose`` picks it
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {"periods_per_rev": float(self.cycles_per_rev)}
@@ -254,15 +248,8 @@ class Cogging(_JointEffect):
     def choose(self, waves: Callable[[int], FloatArray], residual: FloatArray) -> FloatArray:
         """Pick N where sin / cos of N q explain most of ``residual`` (the joint's row,
         stacked over the fit runs; ``waves(N)`` stacks the waves alike); the start there."""
-        best = (-1.0, self.LEAST_CYCLES, 0.0, 0.0)
-        for n in range(self.LEAST_CYCLES, self.MOST_CYCLES + 1):
-            basis = waves(n)
-            (a, b), *_ = np.linalg.lstsq(basis, residual, rcond=None)
-            explained = float(np.sum((basis @ np.array([a, b])) ** 2))
-            if explained > best[0]:
-                best = (explained, n, math.hypot(a, b), math.atan2(b, a))
-        self.cycles_per_rev = best[1]
-        return np.array([min(best[2], self.upper[0]), best[3]])
+        self.cycles_per_rev, amplitude, phase = strongest_wave(waves, residual)
+        return np.array([min(amplitude, self.upper[0]), phase])
 
     def meaningful(self, p: FloatArray) -> bool:
         # the phase has no bound that means anything: only the amplitude is checked
@@ -320,7 +307,7 @@ class ParameterDrift(_JointEffect):
 def library(joints: tuple[str, ...], largest_nm: FloatArray, fastest: FloatArray) -> list[Any]:
     """Every candidate for a robot with ``joints``, whose torques (command or model) reach
     ``largest_nm`` and speeds ``fastest`` [rad/s] (the bounds of the torques' sizes)."""
-    out: list[Any] = [CommandDelay(), SensorDelay()]
+    out: list[Any] = [CommandDelay(), CommandDelay("sensor_delay")]
     for j, name in enumerate(joints):
         top = float(largest_nm[j])
         out += [
