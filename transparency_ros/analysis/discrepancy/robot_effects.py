@@ -30,7 +30,8 @@ from transparency_ros.analysis.discrepancy.model import FloatArray
 
 MOST_DELAY_S = 0.03  # a command acting up to this late
 GAIN_RANGE = (0.2, 5.0)  # a torque constant this far off at most
-PAYLOAD_MOST_KG = 20.0
+PAYLOAD_MOST = 2.0  # a payload up to this times the mass the joint moves (its subtree)
+PAYLOAD_LEAST_KG = 0.1  # (the bound on the payload of a very light link)
 COM_MOST_M = 2.0
 
 
@@ -232,7 +233,8 @@ class ViscousFriction(_JointEffect):
 
 class Cogging(_JointEffect):
     """A torque ripple A sin(N q + phi) of the joint's motor, N cycles per revolution of the
-    joint (picked from the fit runs' residual of the joint's row, ``choose``)."""
+    joint (picked from the fit runs' residual of the joint's row with the effects found so far,
+    ``scan``)."""
 
     def __init__(self, joint: int, name: str, largest_nm: float) -> None:
         top = max(largest_nm, 1e-6)
@@ -244,6 +246,11 @@ class Cogging(_JointEffect):
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {"periods_per_rev": float(self.cycles_per_rev)}
+
+    def scan(self, problem: Any, effects: list[Any], params: list[FloatArray]) -> FloatArray:
+        """The start of a fit against ``effects`` (fitting.fit_candidate's hook): the period
+        scanned on the problem's residual with them (``wave_start``)."""
+        return np.asarray(problem.wave_start(self, effects, params), dtype=float)
 
     def choose(self, waves: Callable[[int], FloatArray], residual: FloatArray) -> FloatArray:
         """Pick N where sin / cos of N q explain most of ``residual`` (the joint's row,
@@ -263,19 +270,37 @@ class Cogging(_JointEffect):
 
 
 class Payload(_JointEffect):
-    """A point mass ``mass_kg`` fixed to the link the joint moves, at ``com_*_m`` in the link's
-    frame: its weight and inertia through the link's regressor columns."""
+    """A point mass ``mass_kg`` fixed to the link the joint moves, its weight and inertia
+    through the link's regressor columns. Where it sits is fitted in the plane through the
+    joint's frame across its axis of rotation (``com_u_m``, ``com_w_m`` along two directions
+    of that plane, in the link's frame): an offset along the axis changes no torque about a
+    parallel axis, and fitted free it wandered to its bound (the payload was then refused as
+    pinned on a planar robot). ``axis`` None (a prismatic joint): all three coordinates."""
 
-    def __init__(self, joint: int, name: str) -> None:
+    def __init__(
+        self, joint: int, name: str, moved_kg: float, axis: FloatArray | None = None
+    ) -> None:
+        # (heavier than twice what the joint moves, it is no payload but a stand-in: a mass of
+        # 13 kg a few millimetres off a 0.5 kg link's axis, a pure weight torque, on a robot
+        # whose concealed payload was 0.46 kg on the next link)
+        most = max(PAYLOAD_MOST * moved_kg, PAYLOAD_LEAST_KG)
+        if axis is None:
+            self.frame = np.eye(3)
+            names: tuple[str, ...] = ("com_x_m", "com_y_m", "com_z_m")
+        else:
+            a = np.asarray(axis, dtype=float) / float(np.linalg.norm(axis))
+            u = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+            u /= np.linalg.norm(u)
+            self.frame = np.stack([u, np.cross(a, u)], axis=1)  # (3, 2): the plane's directions
+            names = ("com_u_m", "com_w_m")
+        k = len(names)
         super().__init__(
-            "payload", joint, name, ("mass_kg", "com_x_m", "com_y_m", "com_z_m"),
-            (0.0, -COM_MOST_M, -COM_MOST_M, -COM_MOST_M),
-            (PAYLOAD_MOST_KG, COM_MOST_M, COM_MOST_M, COM_MOST_M),
-            (0.0, math.nan, math.nan, math.nan), (0.1, 0.0, 0.0, 0.0),
+            "payload", joint, name, ("mass_kg", *names), (0.0, *[-COM_MOST_M] * k),
+            (most, *[COM_MOST_M] * k), (0.0, *[math.nan] * k), (0.05 * most, *[0.0] * k),
         )  # fmt: skip
 
     def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
-        m, c = float(p[0]), np.asarray(p[1:4], dtype=float)
+        m, c = float(p[0]), self.frame @ np.asarray(p[1:], dtype=float)
         r2 = float(c @ c)
         # a point mass's 10 parameters: m, m c, and its inertia about the link's origin
         # (Pinocchio's order Ixx, Ixy, Iyy, Ixz, Iyz, Izz)
@@ -304,9 +329,18 @@ class ParameterDrift(_JointEffect):
         return np.asarray((float(p[0]) - 1.0) * part, dtype=float)
 
 
-def library(joints: tuple[str, ...], largest_nm: FloatArray, fastest: FloatArray) -> list[Any]:
+def library(
+    joints: tuple[str, ...],
+    largest_nm: FloatArray,
+    fastest: FloatArray,
+    axes: list[FloatArray | None] | None = None,
+    moved_kg: FloatArray | None = None,
+) -> list[Any]:
     """Every candidate for a robot with ``joints``, whose torques (command or model) reach
-    ``largest_nm`` and speeds ``fastest`` [rad/s] (the bounds of the torques' sizes)."""
+    ``largest_nm`` and speeds ``fastest`` [rad/s] (the bounds of the torques' sizes); ``axes``:
+    each joint's axis of rotation in its link's frame (None: a prismatic joint, or unknown);
+    ``moved_kg``: the mass each joint moves (its links and all after them; the payload's
+    bound)."""
     out: list[Any] = [CommandDelay(), CommandDelay("sensor_delay")]
     for j, name in enumerate(joints):
         top = float(largest_nm[j])
@@ -317,7 +351,12 @@ def library(joints: tuple[str, ...], largest_nm: FloatArray, fastest: FloatArray
             CoulombFriction(j, name, top),
             ViscousFriction(j, name, top / max(float(fastest[j]), 1e-3)),
             Cogging(j, name, top),
-            Payload(j, name),
+            Payload(
+                j,
+                name,
+                math.inf if moved_kg is None else float(moved_kg[j]),
+                None if axes is None else axes[j],
+            ),
             ParameterDrift(j, name, "mass_scale"),
             ParameterDrift(j, name, "inertia_scale"),
         ]
