@@ -94,6 +94,11 @@ class Discoverer:
             problem.min_improvement if min_improvement is None else min_improvement
         )
         self.progress = progress
+        # the share each effect must still remove on the final model (revisit.still_needed),
+        # where a problem sets another than the search's (the robot's: a search that lets
+        # partial effects in, each kept where the others do not explain what it did)
+        self.keep_improvement = getattr(problem, "keep_improvement", None)
+        self._revisiting = False
         # the last refused step of each shown effect (by id): what the report's note on a
         # shown effect not named says
         self._refused: dict[int, Step] = {}
@@ -122,7 +127,11 @@ class Discoverer:
         )
         searched = effects
         effects, params = rivals_again(self, report, effects, params, floor)
-        effects, params = still_needed(self, report, effects, params, floor)
+        self._revisiting = True
+        try:
+            effects, params = still_needed(self, report, effects, params, floor)
+        finally:
+            self._revisiting = False
         if effects is not searched:  # (each returns the model it was given where it keeps it)
             held_err = problem.error(effects, params, True)
         effects, params, held_err = self._checked_last(
@@ -517,6 +526,8 @@ class Discoverer:
         )
 
     def _share(self, step: Step) -> float:
+        if self._revisiting and self.keep_improvement is not None:
+            return share_needed(step, self.keep_improvement)
         return share_needed(step, self.min_improvement)
 
     def _choose(self, steps: list[Step]) -> Step | None:
