@@ -85,6 +85,18 @@ def test_a_joint_whose_motor_applies_less_than_its_command_is_named_with_its_gai
     assert named[f"torque_gain[{names[1]}]"]["gain"] == pytest.approx(0.7, rel=0.05)
 
 
+def test_the_share_on_the_final_model_can_differ_from_the_searchs(urdf: RobotModel) -> None:
+    """``keep_improvement`` (benchmarks/robot_zoo.py compares rules with it): the gain the
+    search names is taken out of the final model and tried again at that share; at a share
+    no effect can reach it is dropped, with a note."""
+    names = urdf.joint_names
+    loop = Discoverer(RobotProblem(urdf, runs(_Gained(urdf, 1, 0.7), names)))
+    loop.keep_improvement = 1.5
+    report = loop.run()
+    assert report.findings == []
+    assert any(n.startswith(f"dropped torque_gain[{names[1]}]") for n in report.notes)
+
+
 def test_motors_acting_late_are_named_as_the_command_delay(urdf: RobotModel) -> None:
     # (4 steps of 1 ms, and the simulation holds each command over its step: 4.5 ms)
     report = Discoverer(RobotProblem(urdf, runs(urdf, urdf.joint_names, delay_steps=4))).run()
