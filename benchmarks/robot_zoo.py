@@ -36,7 +36,7 @@ delay with the command's hold over half a control period and the motor's lag add
 friction with the baseline draw's difference from the URDF's added), ``allowed`` (what the
 URDF's faults and the friction draws make true on every robot: parameter_drift and friction on
 either joint; a delay twin of a concealed delay, which the balance cannot tell apart; a command
-delay within ``LAG_ALLOWED_S`` of zero). A quantization counts on either joint.
+delay or its twin within ``LAG_ALLOWED_S`` of zero). A quantization counts on either joint.
 
 ``survey`` runs the tool (the package's Python entry points, as the CLI does; ``--share`` and
 ``--keep`` set the loop's shares in the search and on the final model, to compare rules) on
@@ -401,7 +401,7 @@ def score(found: list[dict[str, Any]], truth: dict[str, Any]) -> dict[str, Any]:
         for k in named
         if k not in required
         and k not in truth["allowed"]
-        and not (k == "command_delay" and abs(named[k].get("delay_s", 1.0)) <= LAG_ALLOWED_S)
+        and not (k in TWINS and abs(named[k].get("delay_s", 1.0)) <= LAG_ALLOWED_S)
     ]
     return {"named": hits, "missed": misses, "extra": extra,
             "right": not misses and not extra}  # fmt: skip
@@ -513,7 +513,8 @@ def report(rows: list[dict[str, Any]], command: str, out: str | None) -> None:
         return
     from _results import write_results  # noqa: PLC0415
 
-    write_results(out, "robot_zoo", lines, {"summary": s, "robots": rows})
+    kept = [{k: v for k, v in r.items() if k != "steps"} for r in rows]  # (steps: in --log)
+    write_results(out, "robot_zoo", lines, {"summary": s, "robots": kept})
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -49,7 +49,7 @@ def test_what_is_named_outside_required_and_allowed_is_a_false_finding() -> None
     assert truth["required"] == {}
     found = [
         _found("parameter_drift", "Joint2", inertia_scale=0.56),  # the URDF's fault: allowed
-        _found("command_delay", None, delay_s=0.002),  # the motors' own lag and hold
+        _found("sensor_delay", None, delay_s=0.002),  # the motors' own lag and hold
         _found("payload", "Joint2", mass_kg=0.2),  # no payload on this robot
     ]
     scored = robot_zoo.score(found, truth)
