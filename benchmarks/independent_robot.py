@@ -36,6 +36,7 @@ import math
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -209,21 +210,37 @@ def simulate(
                             ("tau_pert", pert), ("pos_des", qd)):  # fmt: skip
             cols[name].append(value)
         for _ in range(SUBSTEPS):
-            state = np.concatenate([q, v, current], 1)
-            k1 = derivative(state, command)
-            k2 = derivative(state + 0.5 * STEP_S * k1, command)
-            k3 = derivative(state + 0.5 * STEP_S * k2, command)
-            k4 = derivative(state + STEP_S * k3, command)
-            state = state + STEP_S / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            state = rk4(derivative, np.concatenate([q, v, current], 1), command)
             q, v, current = state[:, 0:2], state[:, 2:4], state[:, 4:6]
             new = np.round(q / counts) * counts
             v_report += alpha * ((new - encoder) / STEP_S - v_report)
             encoder = new
+    return per_run(cols, runs)
+
+
+def rk4(
+    derivative: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    state: np.ndarray,
+    command: np.ndarray,
+) -> np.ndarray:
+    """One RK4 step of ``STEP_S``, the command held over it."""
+    k1 = derivative(state, command)
+    k2 = derivative(state + 0.5 * STEP_S * k1, command)
+    k3 = derivative(state + 0.5 * STEP_S * k2, command)
+    k4 = derivative(state + STEP_S * k3, command)
+    return state + STEP_S / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def per_run(cols: dict[str, list[np.ndarray]], runs: int) -> list[dict[str, np.ndarray]]:
+    """Columns recorded for all runs at once (per sample, (runs,) or (runs, 2)) as each run's
+    columns with the lab's names (``time``, ``pos_meas1``, ``pos_meas2``, ...)."""
     out = []
     for r in range(runs):
         run = {"time": np.array([c[r] for c in cols["time"]])}
-        for name in ("pos_meas", "vel_meas", "tau_con", "tau_meas", "tau_pert", "pos_des"):
-            stacked = np.array([c[r] for c in cols[name]])
+        for name, column in cols.items():
+            if name == "time":
+                continue
+            stacked = np.array([c[r] for c in column])
             for j in range(2):
                 run[f"{name}{j + 1}"] = stacked[:, j]
         out.append(run)

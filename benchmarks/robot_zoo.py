@@ -64,10 +64,19 @@ import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).parent))
-from independent_robot import KD, KP, LAB, Plant, desired, lab_parameters
+from independent_robot import (
+    KD,
+    KP,
+    LAB,
+    STEP_S,
+    SUBSTEPS,
+    Plant,
+    desired,
+    lab_parameters,
+    per_run,
+    rk4,
+)
 
-STEP_S = 2.5e-4
-SUBSTEPS = 10  # 400 Hz control
 RUNS = 6
 DURATION_S = 8.0
 KINDS = (
@@ -238,12 +247,7 @@ def simulate(
             # the command the motors act on: cmd_delay late (held between control steps)
             back = (cmd_delay - s * STEP_S) / (STEP_S * SUBSTEPS)
             command = cmd_hist[-1 - max(0, math.ceil(back))] if back > 0 else tau_con
-            state = np.concatenate([q, v, current], 1)
-            k1 = derivative(state, command)
-            k2 = derivative(state + 0.5 * STEP_S * k1, command)
-            k3 = derivative(state + 0.5 * STEP_S * k2, command)
-            k4 = derivative(state + STEP_S * k3, command)
-            state = state + STEP_S / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            state = rk4(derivative, np.concatenate([q, v, current], 1), command)
             q, v, current = state[:, 0:2], state[:, 2:4], state[:, 4:6]
             q_hist = [*q_hist[1:], q.copy()]
             lo = math.floor(lag_steps)
@@ -252,15 +256,7 @@ def simulate(
             new = np.round(seen / step) * step
             v_report += alpha * ((new - encoder) / STEP_S - v_report)
             encoder = new
-    out = []
-    for r in range(runs):
-        run = {"time": np.array([c[r] for c in cols["time"]])}
-        for name in ("pos_meas", "vel_meas", "tau_con"):
-            stacked = np.array([c[r] for c in cols[name]])
-            for j in range(2):
-                run[f"{name}{j + 1}"] = stacked[:, j]
-        out.append(run)
-    return out
+    return per_run(cols, runs)
 
 
 def _urdf_friction() -> list[float]:
