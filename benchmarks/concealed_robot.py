@@ -20,7 +20,7 @@ balance: applied(command') - effect = what moved the real robot = tau_con):
   torques, M(q) q'' + C(q, q') q' - G(q) of the lab's equations with m2 = m, r2 = r, I2 = m r^2
   (q', q'' from the recorded positions by a Savitzky-Golay filter);
 * sensor_delay d: the positions and speeds recorded d late: q'(t) = q(t - d);
-* quantization s: the positions coarsened to multiples of s.
+* quantization s: the positions of both joints coarsened to multiples of s (named on either).
 
 None of this shares code with the tool (numpy, scipy and the lab's published equations). The
 tool runs as a user runs it (`transparency discrepancy RUN.csv ... --urdf pendubot.urdf --json`,
@@ -55,6 +55,7 @@ from _results import write_results  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "external" / "double_pendulum"
 SHOULDER, ELBOW = "Joint1", "Joint2"  # the URDF's joint names
+BOTH = "both"  # an effect concealed on every joint (the tool names it per joint)
 G = 9.81
 L1 = 0.2  # the lab's model_parameters.yml: l1 [m]
 Columns = dict[str, np.ndarray]
@@ -139,7 +140,7 @@ def quantization(cols: Columns, step: float) -> None:
 class Case:
     name: str
     kind: str  # the tool's name for it
-    joint: str | None  # None: the whole robot
+    joint: str | None  # None: the whole robot; BOTH: each joint
     parameter: str  # the JSON parameter compared
     value: float
     relative: str  # "ratio" or "difference" against the baseline's finding
@@ -162,7 +163,7 @@ CASES = [
          lambda c: payload(c, 0.3, 0.3)),
     Case("sensor_delay", "sensor_delay", None, "delay_s", 0.005, "difference",
          lambda c: sensor_delay(c, 0.005)),
-    Case("quantization", "quantization", SHOULDER, "step_rad", 0.01, "difference",
+    Case("quantization", "quantization", BOTH, "step_rad", 0.01, "difference",
          lambda c: quantization(c, 0.01)),
 ]  # fmt: skip
 
@@ -183,15 +184,21 @@ def _key(finding: dict) -> tuple[str, str | None]:
     return finding["effect"], finding["joint"]
 
 
+def _concealed(finding: dict, case: Case) -> bool:
+    """Whether ``finding`` names what ``case`` conceals (on its joint, or on any for BOTH)."""
+    kind, joint = _key(finding)
+    return kind == case.kind and case.joint in (BOTH, joint)
+
+
 def _judge(case: Case, base: dict, result: dict) -> dict:
     base_keys = {_key(f) for f in base["findings"]}
-    named = [f for f in result["findings"] if _key(f) == (case.kind, case.joint)]
+    named = [f for f in result["findings"] if _concealed(f, case)]
     extra = [_key(f) for f in result["findings"]
-             if _key(f) not in base_keys and _key(f) != (case.kind, case.joint)]  # fmt: skip
+             if _key(f) not in base_keys and not _concealed(f, case)]  # fmt: skip
     found = None
     if named:
         value = named[0]["parameters"].get(case.parameter)
-        before = [f for f in base["findings"] if _key(f) == (case.kind, case.joint)]
+        before = [f for f in base["findings"] if _key(f) == _key(named[0])]
         reference = before[0]["parameters"].get(case.parameter) if before else None
         if value is not None and case.relative == "ratio":
             found = value / (reference if reference else 1.0)

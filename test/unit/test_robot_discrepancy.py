@@ -54,14 +54,16 @@ class _Cogged(_Gained):
         return self.model.forward_dynamics(q, v, tau)
 
 
-def runs(truth: object, names: tuple[str, ...], *, delay_steps: int = 0) -> list[JointRecording]:
-    """Three 4 s runs at 1 kHz, positions read through a 14-bit encoder."""
+def runs(
+    truth: object, names: tuple[str, ...], *, delay_steps: int = 0, encoder: float = ENCODER_RAD
+) -> list[JointRecording]:
+    """Three 4 s runs at 1 kHz, positions read through an encoder (14 bits unless told)."""
     out = []
     for phase in (0.0, 1.3, 2.6):
         stamps, q, v, command = simulate_chain(
             truth, np.zeros((4000, len(names))), delay_steps=delay_steps, phase=phase
         )  # type: ignore[arg-type]
-        q = np.round(q / ENCODER_RAD) * ENCODER_RAD
+        q = np.round(q / encoder) * encoder
         out.append(JointRecording(f"run{phase:g}", stamps, names, q, v, command))
     return out
 
@@ -157,6 +159,23 @@ def test_a_payload_is_placed_across_its_joints_axis_and_weighs_at_most_twice_wha
         assert np.allclose(cand.frame.T @ [1.0, 0.0, 0.0], 0.0)  # (the chain's axes: x)
         assert cand.upper[0] == pytest.approx(2 * moved)
         assert not cand.meaningful(np.array([2 * moved, 0.0, 0.1]))
+
+
+def test_a_coarse_encoders_lattice_is_read_off_the_positions_and_named(urdf: RobotModel) -> None:
+    """512 counts per turn: the positions move by a count or so between samples at 1 kHz, and
+    the lattice is named on both joints with its step, read off the recordings (a 14-bit
+    encoder moves several counts a sample and is not named: the other tests)."""
+    names = urdf.joint_names
+    step = 2 * math.pi / 512
+    report = Discoverer(RobotProblem(urdf, runs(urdf, names, encoder=step))).run()
+    named = {f.effect: f for f in report.findings}
+    assert {f"quantization[{n}]" for n in names} <= set(named), set(named)
+    for n in names:
+        finding = named[f"quantization[{n}]"]
+        assert finding.parameters["step_rad"] == pytest.approx(step, rel=1e-6)
+        low, high = finding.confidence_interval["step_rad"]
+        assert low < step < high
+        assert "512 counts per turn" in finding.evidence
 
 
 def test_a_robot_its_urdf_describes_gets_nothing_named(urdf: RobotModel) -> None:

@@ -31,7 +31,13 @@ import numpy.typing as npt
 from scipy.signal import butter, sosfiltfilt
 
 from transparency_ros.analysis.discrepancy.problem import Trace, position_noise, spectrum_peak
-from transparency_ros.analysis.discrepancy.robot_effects import Context, library
+from transparency_ros.analysis.discrepancy.robot_effects import (
+    LATTICE_COUNTS,
+    Context,
+    EncoderLattice,
+    lattice_step,
+    library,
+)
 from transparency_ros.analysis.robot_data import JointRecording
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.robot_calibration import effort_limit
@@ -152,7 +158,7 @@ class RobotProblem:
         fastest = np.max([np.max(np.abs(r.v), axis=0) for r in self.fit_runs], axis=0)
         self._candidates = library(
             tuple(model.joint_names), largest, fastest, _axes(pm), _moved_kg(pm)
-        )
+        ) + self._lattices(runs)
         self.min_improvement = 0.5  # as the torque-driven 1-DoF problem's
         self.nominal = {
             f"{kind}[{name}]": float(value)
@@ -245,6 +251,18 @@ class RobotProblem:
         inertia = np.median([np.diag(self.model.mass_matrix(q)) for q in visited], axis=0)
         floor = np.sqrt(sigma_tau**2 * g0 + (inertia * sigma_q) ** 2 * g2)
         return np.asarray(np.maximum(floor, 1e-6), dtype=float)
+
+    def _lattices(self, recordings: Sequence[JointRecording]) -> list[Any]:
+        """Per joint whose recorded positions sit on a lattice (``lattice_step``) that shapes
+        the recorded motion (a median of at most ``LATTICE_COUNTS`` counts moved between
+        samples), the lattice as a candidate read off the recordings."""
+        out = []
+        for j, name in enumerate(self.model.joint_names):
+            joined = np.concatenate([np.r_[r.position[:, j], np.nan] for r in recordings])
+            lattice = lattice_step(joined)
+            if lattice is not None and lattice[1] <= LATTICE_COUNTS:
+                out.append(EncoderLattice(j, name, *lattice))
+        return out
 
     # -- what the loop asks -------------------------------------------------------------
     def candidates(self) -> list[Any]:
@@ -351,6 +369,7 @@ class RobotProblem:
             "coulomb_friction",
             "viscous_friction",
             "cogging",
+            "quantization",
         }:
             return {effect.joint}
         # a link's inertia acts on the joint that moves it and on every joint above it

@@ -329,6 +329,66 @@ class ParameterDrift(_JointEffect):
         return np.asarray((float(p[0]) - 1.0) * part, dtype=float)
 
 
+class EncoderLattice(_JointEffect):
+    """The joint's positions recorded on a lattice of ``step_rad`` (an encoder's counts), read
+    off the recordings (:func:`lattice_step`), not fitted: a simulator that leaves the lattice
+    out differs from the recordings by it. It changes no torque of the balance (what the
+    lattice does there is noise, which the noise floor counts); it is named where it shapes
+    the recorded motion: half of the time the positions move by at most ``LATTICE_COUNTS``
+    counts between samples (``counts``, the median). Fine encoders move 10-16 counts a sample
+    on the real pendubot and on the robot zoo's robots, coarse ones (2^9-2^10 counts per
+    turn) 0-1: then it is the lattice, not the model, that limits what the balance sees."""
+
+    stage = "sensor"
+    fittable = False
+    declared = True
+    shown = True
+
+    def __init__(self, joint: int, name: str, step: float, counts: float) -> None:
+        super().__init__(
+            "quantization", joint, name, ("step_rad",), (0.0,), (math.inf,), (0.0,), (step,)
+        )
+        self.step, self.counts = step, counts
+
+    def meaningful(self, p: FloatArray) -> bool:
+        return True  # read off, not a fit that may stand at a bound of its range
+
+    def measured_interval(self) -> list[tuple[float, float]]:
+        # (read off thousands of increments, to within what is taken as on the lattice)
+        return [(self.step * (1 - LATTICE_TOLERANCE), self.step * (1 + LATTICE_TOLERANCE))]
+
+    def describe(self) -> str:
+        return (
+            f"the positions sit on a lattice of {self.step:.4g} rad "
+            f"({2 * math.pi / self.step:.0f} counts per turn) and move by a median "
+            f"{self.counts:.0f} count(s) between samples"
+        )
+
+
+LATTICE_COUNTS = 3.0  # median counts moved between samples, at most, for a lattice to be named
+LATTICE_TOLERANCE = 0.02  # an increment this close to a multiple of the step is on the lattice
+LATTICE_ON = 0.99  # of the nonzero increments on it, for the positions to sit on a lattice
+
+
+def lattice_step(position: FloatArray) -> tuple[float, float] | None:
+    """(step, median counts moved between samples) of the lattice the positions ``position``
+    (one joint, recordings concatenated with NaN between them) sit on, or None: their
+    smallest increment, where at least ``LATTICE_ON`` of the nonzero increments are
+    multiples of it (within ``LATTICE_TOLERANCE``); the step refined over all of them."""
+    moved = np.abs(np.diff(position))
+    moved = moved[np.isfinite(moved)]
+    steps = moved[moved > 0]
+    if steps.size < 100:
+        return None
+    smallest = float(np.min(steps))
+    counts = np.round(steps / smallest)
+    on = np.abs(steps / smallest - counts) <= LATTICE_TOLERANCE
+    if np.mean(on) < LATTICE_ON:
+        return None
+    step = float(np.sum(steps[on] * counts[on]) / np.sum(counts[on] ** 2))
+    return step, float(np.median(moved) / step)
+
+
 def library(
     joints: tuple[str, ...],
     largest_nm: FloatArray,
