@@ -16,6 +16,7 @@ import pytest
 
 from transparency_ros.analysis.discrepancy.discover import Discoverer
 from transparency_ros.analysis.discrepancy.robot import RobotProblem
+from transparency_ros.analysis.discrepancy.robot_effects import LATTICE_COUNTS, lattice_step
 from transparency_ros.analysis.robot_data import JointRecording
 from transparency_ros.cli import main
 from transparency_ros.core.errors import ConfigError
@@ -176,6 +177,20 @@ def test_a_coarse_encoders_lattice_is_read_off_the_positions_and_named(urdf: Rob
         low, high = finding.confidence_interval["step_rad"]
         assert low < step < high
         assert "512 counts per turn" in finding.evidence
+
+
+def test_a_lattice_is_judged_by_what_the_joint_moves_while_it_moves() -> None:
+    """A fine encoder on a joint at rest four fifths of the time (a pendubot's elbow held by
+    its friction) moves no count on most samples, yet 13 a sample while it swings at 2 rad/s
+    (400 Hz): it does not shape the motion. A 512-count one at the same speed moves 0.4."""
+    dt, fine, coarse = 1 / 400, 2 * math.pi / 2**14, 2 * math.pi / 512
+    swing = 0.5 * np.sin(np.arange(800) * dt * 4.0)  # 2 rad/s at its fastest
+    rests = np.r_[np.zeros(3200), swing, np.full(3200, swing[-1])]
+    for step, expected_low in ((fine, False), (coarse, True)):
+        got = lattice_step(np.round(rests / step) * step)
+        assert got is not None
+        assert got[0] == pytest.approx(step, rel=1e-6)
+        assert (got[1] <= LATTICE_COUNTS) is expected_low, got
 
 
 def test_a_robot_its_urdf_describes_gets_nothing_named(urdf: RobotModel) -> None:

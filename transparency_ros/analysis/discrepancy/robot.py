@@ -254,8 +254,8 @@ class RobotProblem:
 
     def _lattices(self, recordings: Sequence[JointRecording]) -> list[Any]:
         """Per joint whose recorded positions sit on a lattice (``lattice_step``) that shapes
-        the recorded motion (a median of at most ``LATTICE_COUNTS`` counts moved between
-        samples), the lattice as a candidate read off the recordings."""
+        the recorded motion (while the joint moves, a median of at most ``LATTICE_COUNTS``
+        counts moved between samples), the lattice as a candidate read off the recordings."""
         out = []
         for j, name in enumerate(self.model.joint_names):
             joined = np.concatenate([np.r_[r.position[:, j], np.nan] for r in recordings])

@@ -334,10 +334,11 @@ class EncoderLattice(_JointEffect):
     off the recordings (:func:`lattice_step`), not fitted: a simulator that leaves the lattice
     out differs from the recordings by it. It changes no torque of the balance (what the
     lattice does there is noise, which the noise floor counts); it is named where it shapes
-    the recorded motion: half of the time the positions move by at most ``LATTICE_COUNTS``
-    counts between samples (``counts``, the median). Fine encoders move 10-16 counts a sample
-    on the real pendubot and on the robot zoo's robots, coarse ones (2^9-2^10 counts per
-    turn) 0-1: then it is the lattice, not the model, that limits what the balance sees."""
+    the recorded motion: while the joint moves, it moves at most ``LATTICE_COUNTS`` counts
+    between samples (``counts``, a median; :func:`lattice_step`). Fine encoders move 10-16
+    counts a sample on the real pendubot and on the robot zoo's robots, coarse ones (2^9-2^10
+    counts per turn) 0-1: then it is the lattice, not the model, that limits what the
+    balance sees."""
 
     stage = "sensor"
     fittable = False
@@ -360,24 +361,29 @@ class EncoderLattice(_JointEffect):
     def describe(self) -> str:
         return (
             f"the positions sit on a lattice of {self.step:.4g} rad "
-            f"({2 * math.pi / self.step:.0f} counts per turn) and move by a median "
-            f"{self.counts:.0f} count(s) between samples"
+            f"({2 * math.pi / self.step:.0f} counts per turn) and, while the joint moves, by a "
+            f"median {self.counts:.2g} count(s) between samples"
         )
 
 
 LATTICE_COUNTS = 3.0  # median counts moved between samples, at most, for a lattice to be named
 LATTICE_TOLERANCE = 0.02  # an increment this close to a multiple of the step is on the lattice
 LATTICE_ON = 0.99  # of the nonzero increments on it, for the positions to sit on a lattice
+LATTICE_WINDOW = 20  # samples (50 ms at 400 Hz) over which the counts moved are taken
+LATTICE_MOVING = 4.0  # counts moved in a window, at least, for the joint to be moving there
 
 
 def lattice_step(position: FloatArray) -> tuple[float, float] | None:
-    """(step, median counts moved between samples) of the lattice the positions ``position``
-    (one joint, recordings concatenated with NaN between them) sit on, or None: their
-    smallest increment, where at least ``LATTICE_ON`` of the nonzero increments are
-    multiples of it (within ``LATTICE_TOLERANCE``); the step refined over all of them."""
+    """(step, counts moved between samples while the joint moves) of the lattice the
+    positions ``position`` (one joint, recordings concatenated with NaN between them) sit on,
+    or None: their smallest increment, where at least ``LATTICE_ON`` of the nonzero
+    increments are multiples of it (within ``LATTICE_TOLERANCE``), the step refined over all
+    of them. The counts are the median, over windows of ``LATTICE_WINDOW`` samples in which
+    the joint moves ``LATTICE_MOVING`` counts or more, of the counts it moves per sample
+    there: a joint at rest moves none (a pendubot's elbow held by its friction for seconds
+    on a 14-bit encoder was named so, taken over every sample)."""
     moved = np.abs(np.diff(position))
-    moved = moved[np.isfinite(moved)]
-    steps = moved[moved > 0]
+    steps = moved[np.isfinite(moved) & (moved > 0)]
     if steps.size < 100:
         return None
     smallest = float(np.min(steps))
@@ -386,7 +392,12 @@ def lattice_step(position: FloatArray) -> tuple[float, float] | None:
     if np.mean(on) < LATTICE_ON:
         return None
     step = float(np.sum(steps[on] * counts[on]) / np.sum(counts[on] ** 2))
-    return step, float(np.median(moved) / step)
+    ends = position[::LATTICE_WINDOW]
+    per_window = np.abs(np.diff(ends)) / step
+    moving = per_window[np.isfinite(per_window) & (per_window >= LATTICE_MOVING)]
+    if moving.size == 0:
+        return None
+    return step, float(np.median(moving)) / LATTICE_WINDOW
 
 
 def library(
