@@ -82,6 +82,10 @@ class Discoverer:
     """The loop on one :class:`Problem`: :meth:`run` names effects one round at a time (pairs
     when no single effect explains enough) and reports what is left."""
 
+    # (class defaults too: a loop made without __init__, as test_revisit's, has them)
+    keep_improvement: float | None = None
+    _revisiting = False
+
     def __init__(
         self,
         problem: Problem,
