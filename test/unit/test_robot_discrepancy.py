@@ -181,16 +181,20 @@ def test_a_coarse_encoders_lattice_is_read_off_the_positions_and_named(urdf: Rob
 
 def test_a_lattice_is_judged_by_what_the_joint_moves_while_it_moves() -> None:
     """A fine encoder on a joint at rest four fifths of the time (a pendubot's elbow held by
-    its friction) moves no count on most samples, yet 13 a sample while it swings at 2 rad/s
-    (400 Hz): it does not shape the motion. A 512-count one at the same speed moves 0.4."""
+    its friction) moves no count on most samples, yet 10 per 2 ms while it swings at 2 rad/s
+    (400 Hz): it does not shape the motion. A 512-count one at the same speed moves 0.3. At
+    5 kHz the fine one moves a count a sample, and is judged alike (per 2 ms, not per sample)."""
     dt, fine, coarse = 1 / 400, 2 * math.pi / 2**14, 2 * math.pi / 512
     swing = 0.5 * np.sin(np.arange(800) * dt * 4.0)  # 2 rad/s at its fastest
     rests = np.r_[np.zeros(3200), swing, np.full(3200, swing[-1])]
     for step, expected_low in ((fine, False), (coarse, True)):
-        got = lattice_step(np.round(rests / step) * step)
+        got = lattice_step(np.round(rests / step) * step, dt)
         assert got is not None
         assert got[0] == pytest.approx(step, rel=1e-6)
         assert (got[1] <= LATTICE_COUNTS) is expected_low, got
+    fast = np.interp(np.arange(0, rests.size * dt, 2e-4), np.arange(rests.size) * dt, rests)
+    got = lattice_step(np.round(fast / fine) * fine, 2e-4)
+    assert got is not None and got[1] > LATTICE_COUNTS, got
 
 
 def test_a_robot_its_urdf_describes_gets_nothing_named(urdf: RobotModel) -> None:

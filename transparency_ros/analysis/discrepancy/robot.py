@@ -255,11 +255,13 @@ class RobotProblem:
     def _lattices(self, recordings: Sequence[JointRecording]) -> list[Any]:
         """Per joint whose recorded positions sit on a lattice (``lattice_step``) that shapes
         the recorded motion (while the joint moves, a median of at most ``LATTICE_COUNTS``
-        counts moved between samples), the lattice as a candidate read off the recordings."""
+        counts moved per 2 ms), the lattice as a candidate read off the recordings."""
+        sample_s = float(np.median(np.concatenate([np.diff(r.stamps_ns) for r in recordings])))
+        sample_s *= 1e-9
         out = []
         for j, name in enumerate(self.model.joint_names):
             joined = np.concatenate([np.r_[r.position[:, j], np.nan] for r in recordings])
-            lattice = lattice_step(joined)
+            lattice = lattice_step(joined, sample_s)
             if lattice is not None and lattice[1] <= LATTICE_COUNTS:
                 out.append(EncoderLattice(j, name, *lattice))
         return out

@@ -335,10 +335,9 @@ class EncoderLattice(_JointEffect):
     out differs from the recordings by it. It changes no torque of the balance (what the
     lattice does there is noise, which the noise floor counts); it is named where it shapes
     the recorded motion: while the joint moves, it moves at most ``LATTICE_COUNTS`` counts
-    between samples (``counts``, a median; :func:`lattice_step`). Fine encoders move 10-16
-    counts a sample on the real pendubot and on the robot zoo's robots, coarse ones (2^9-2^10
-    counts per turn) 0-1: then it is the lattice, not the model, that limits what the
-    balance sees."""
+    per 2 ms (``counts``, a median; :func:`lattice_step`). Fine encoders move 3.1-22 counts per
+    2 ms on the real pendubot and on the robot zoo's robots, coarse ones (2^9-2^10 counts per
+    turn) 0.36-1.4: then it is the lattice, not the model, that limits what the balance sees."""
 
     stage = "sensor"
     fittable = False
@@ -362,26 +361,33 @@ class EncoderLattice(_JointEffect):
         return (
             f"the positions sit on a lattice of {self.step:.4g} rad "
             f"({2 * math.pi / self.step:.0f} counts per turn) and, while the joint moves, by a "
-            f"median {self.counts:.2g} count(s) between samples"
+            f"median {self.counts:.2g} count(s) per 2 ms"
         )
 
 
-LATTICE_COUNTS = 3.0  # median counts moved between samples, at most, for a lattice to be named
+# median counts moved per LATTICE_PER_S, at most, for a lattice to be named: the middle (in
+# ratio) of the gap between the 14-bit encoders of the real pendubot and of the robot zoo's
+# 120 robots (seeds 100-129, 300-329, 400-429, 500-529: 3.1 to 22) and the zoo's 2^9-2^10
+# count ones (0.36 to 1.4)
+LATTICE_COUNTS = 2.0
+LATTICE_PER_S = 0.002  # (the balance's grid step)
 LATTICE_TOLERANCE = 0.02  # an increment this close to a multiple of the step is on the lattice
 LATTICE_ON = 0.99  # of the nonzero increments on it, for the positions to sit on a lattice
-LATTICE_WINDOW = 20  # samples (50 ms at 400 Hz) over which the counts moved are taken
+LATTICE_WINDOW_S = 0.05  # windows over which the counts moved are taken
 LATTICE_MOVING = 4.0  # counts moved in a window, at least, for the joint to be moving there
 
 
-def lattice_step(position: FloatArray) -> tuple[float, float] | None:
-    """(step, counts moved between samples while the joint moves) of the lattice the
-    positions ``position`` (one joint, recordings concatenated with NaN between them) sit on,
-    or None: their smallest increment, where at least ``LATTICE_ON`` of the nonzero
-    increments are multiples of it (within ``LATTICE_TOLERANCE``), the step refined over all
-    of them. The counts are the median, over windows of ``LATTICE_WINDOW`` samples in which
-    the joint moves ``LATTICE_MOVING`` counts or more, of the counts it moves per sample
-    there: a joint at rest moves none (a pendubot's elbow held by its friction for seconds
-    on a 14-bit encoder was named so, taken over every sample)."""
+def lattice_step(position: FloatArray, sample_s: float) -> tuple[float, float] | None:
+    """(step, counts moved per ``LATTICE_PER_S`` while the joint moves) of the lattice the
+    positions ``position`` (one joint, recordings concatenated with NaN between them,
+    sampled every ``sample_s``) sit on, or None: their smallest increment, where at least
+    ``LATTICE_ON`` of the nonzero increments are multiples of it (within
+    ``LATTICE_TOLERANCE``), the step refined over all of them. The counts are the median,
+    over windows of ``LATTICE_WINDOW_S`` in which the joint moves ``LATTICE_MOVING`` counts
+    or more, of the counts it moves there per ``LATTICE_PER_S`` (a time, not a sample: a
+    faster recorder moves fewer counts between samples on the same encoder). Taken over every
+    sample instead, a joint at rest moves none (a pendubot's elbow held by its friction for
+    seconds on a 14-bit encoder was named so)."""
     moved = np.abs(np.diff(position))
     steps = moved[np.isfinite(moved) & (moved > 0)]
     if steps.size < 100:
@@ -392,12 +398,12 @@ def lattice_step(position: FloatArray) -> tuple[float, float] | None:
     if np.mean(on) < LATTICE_ON:
         return None
     step = float(np.sum(steps[on] * counts[on]) / np.sum(counts[on] ** 2))
-    ends = position[::LATTICE_WINDOW]
-    per_window = np.abs(np.diff(ends)) / step
+    window = max(1, round(LATTICE_WINDOW_S / sample_s))
+    per_window = np.abs(np.diff(position[::window])) / step
     moving = per_window[np.isfinite(per_window) & (per_window >= LATTICE_MOVING)]
     if moving.size == 0:
         return None
-    return step, float(np.median(moving)) / LATTICE_WINDOW
+    return step, float(np.median(moving)) * LATTICE_PER_S / (window * sample_s)
 
 
 def library(
