@@ -99,8 +99,9 @@ class Discoverer:
         )
         self.progress = progress
         # the share each effect must still remove on the final model (revisit.still_needed),
-        # where a problem sets another than the search's (the robot's: a search that lets
-        # partial effects in, each kept where the others do not explain what it did)
+        # where a problem or a caller sets another than the search's: a search that lets
+        # partial effects in, each kept where the others do not explain what it did
+        # (benchmarks/robot_zoo.py compares such rules; no problem sets one now)
         self.keep_improvement = getattr(problem, "keep_improvement", None)
         self._revisiting = False
         # the last refused step of each shown effect (by id): what the report's note on a
