@@ -82,9 +82,10 @@ class Discoverer:
     """The loop on one :class:`Problem`: :meth:`run` names effects one round at a time (pairs
     when no single effect explains enough) and reports what is left."""
 
-    # (class defaults too: a loop made without __init__, as test_revisit's, has them)
+    # the share each effect must still remove on the final model (revisit.still_needed;
+    # None: min_improvement); benchmarks/robot_zoo.py compares rules with it. (A class
+    # default: test_revisit makes its loop without __init__.)
     keep_improvement: float | None = None
-    _revisiting = False
 
     def __init__(
         self,
@@ -98,12 +99,6 @@ class Discoverer:
             problem.min_improvement if min_improvement is None else min_improvement
         )
         self.progress = progress
-        # the share each effect must still remove on the final model (revisit.still_needed),
-        # where a problem or a caller sets another than the search's: a search that lets
-        # partial effects in, each kept where the others do not explain what it did
-        # (benchmarks/robot_zoo.py compares such rules; no problem sets one now)
-        self.keep_improvement = getattr(problem, "keep_improvement", None)
-        self._revisiting = False
         # the last refused step of each shown effect (by id): what the report's note on a
         # shown effect not named says
         self._refused: dict[int, Step] = {}
@@ -132,11 +127,7 @@ class Discoverer:
         )
         searched = effects
         effects, params = rivals_again(self, report, effects, params, floor)
-        self._revisiting = True
-        try:
-            effects, params = still_needed(self, report, effects, params, floor)
-        finally:
-            self._revisiting = False
+        effects, params = still_needed(self, report, effects, params, floor)
         if effects is not searched:  # (each returns the model it was given where it keeps it)
             held_err = problem.error(effects, params, True)
         effects, params, held_err = self._checked_last(
@@ -513,8 +504,9 @@ class Discoverer:
         mask, floor = scope
         return rmse(base.err[mask]), rmse(err[mask]), floor
 
-    def _names(self, step: Step, base: Base) -> bool:
-        """Whether ``step`` names its effects: it removes at least ``min_improvement`` of the
+    def _names(self, step: Step, base: Base, share: float | None = None) -> bool:
+        """Whether ``step`` names its effects: it removes at least ``share`` (None:
+        ``min_improvement``) of the
         held-out error above the noise floor, a tenth of the floor at least (both on the error
         it is judged on, see _judged), improves the information criterion by 10, every effect
         in it is meaningful (no drift scales near 1, no fit against a bound, no rebound below
@@ -525,15 +517,13 @@ class Discoverer:
             step.meaningful
             and not null_inside(step)
             and step.judged[0] - step.judged[1] >= 0.1 * step.judged[2]
-            and step.gain >= self._share(step)
+            and step.gain >= self._share(step, share)
             and step.aic < base.aic - 10
             and all(step.aic < a - 10 for a in step.alone_aic)
         )
 
-    def _share(self, step: Step) -> float:
-        if self._revisiting and self.keep_improvement is not None:
-            return share_needed(step, self.keep_improvement)
-        return share_needed(step, self.min_improvement)
+    def _share(self, step: Step, share: float | None = None) -> float:
+        return share_needed(step, self.min_improvement if share is None else share)
 
     def _choose(self, steps: list[Step]) -> Step | None:
         return choose(steps, getattr(self.problem, "expected", lambda _e, _p: False))

@@ -81,10 +81,11 @@ def still_needed(
     """Each effect the search named alone (``_searched`` of the loop, in the order found: not
     those declared or shown, named as a pair or standing for a shown effect), taken out of
     the final model, the others refitted without it, and tried again by the rule that named
-    it (``_names``). A choice made from the data when it was named (cogging's period,
-    ``scan``) is kept, its fit started from its values in the final model, not made again on
-    a model without it (zoo_10679: a cogging named at 298 periods per revolution, truth 297,
-    removing 0.83 of the error, was scanned again to 306 here and removed 0.71, and was
+    it (``_names``, at the loop's ``keep_improvement`` where it has one). A choice made from
+    the data when it was named (cogging's period, ``scan``) is kept, its fit started from its
+    values in the final model, not made again on a model without it (zoo_10679: a cogging
+    named at 298 periods per revolution, truth 297, removing 0.83 of the error, was scanned
+    again to 306 here and removed 0.71, and was
     dropped); the others are fitted from their own starts, as in the search. One that no
     longer names is dropped with its finding, and a note says so: what it explained when it
     was named, an effect found after it explains now. The others keep the values refitted
@@ -102,7 +103,7 @@ def still_needed(
         # (a choice made from the data when it was named kept: the fit starts from its values)
         start = params[i] if getattr(cand, "scan", None) is not None else None
         step = loop._single(others, rest, cand, base, start=start)
-        if loop._names(step, base):
+        if loop._names(step, base, loop.keep_improvement):
             i += 1
             continue
         loop.progress(f"{cand.name} is no longer needed on the final model: dropped")
