@@ -175,9 +175,7 @@ def simulate(
         true["I2"] = lab["I2"] + m * r**2  # (the lab's I2 is about the joint's axis)
     plant = Plant(true)
     driven = np.array([1.0, 0.0 if robot["pendubot"] else 1.0])
-    amp = (
-        np.array(robot["amplitude"]) * driven if robot["pendubot"] else np.array(robot["amplitude"])
-    )
+    amp = np.array(robot["amplitude"]) * driven  # (a pendubot's elbow follows no reference)
     ref = np.stack([rng.uniform(0.5, 1.0, (runs, 2, 2)) * amp[:, None],
                     2 * math.pi * rng.uniform(0.3, 1.0, (runs, 2, 2)),
                     rng.uniform(0, 2 * math.pi, (runs, 2, 2))], -1)  # fmt: skip
