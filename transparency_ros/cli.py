@@ -16,6 +16,7 @@ from collections.abc import Sequence
 
 from transparency_ros import __version__
 from transparency_ros.commands import (
+    assay,
     compare,
     demo,
     detect,
@@ -33,7 +34,7 @@ from transparency_ros.core.interrupts import (
     terminate_like_interrupt,
 )
 
-SUBCOMMANDS = (model, feelcage, rig, evaluate, salvage, discrepancy, compare, detect, demo)
+SUBCOMMANDS = (model, feelcage, rig, evaluate, salvage, discrepancy, compare, detect, assay, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

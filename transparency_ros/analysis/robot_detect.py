@@ -148,10 +148,12 @@ def constant_thresholds(residuals: Sequence[FloatArray]) -> FloatArray:
 
 def with_threshold(recording: JointRecording, residual: FloatArray, per_joint: FloatArray
                    ) -> Detection:  # fmt: skip
-    return _detect(recording, residual, np.broadcast_to(per_joint, residual.shape))
+    return detect(recording, residual, np.broadcast_to(per_joint, residual.shape))
 
 
-def _detect(recording: JointRecording, residual: FloatArray, threshold: FloatArray) -> Detection:
+def detect(recording: JointRecording, residual: FloatArray, threshold: FloatArray) -> Detection:
+    """The live estimator's Schmitt trigger on ``residual`` / ``threshold`` (both (samples,
+    joints); a threshold of inf never fires)."""
     settings = DetectorSettings(contact_onset=1.0, contact_release=RELEASE_RATIO)
     detector = SchmittDetector(default=settings)
     onsets: list[list[float]] = [[] for _ in recording.joints]
