@@ -157,12 +157,13 @@ def test_the_assay_from_the_command_line_on_the_real_double_pendulum(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     """Two of the lab's runs without contact, two folds: a line per detector and joint, and
-    the JSON scripts read; bad options get one clear line."""
+    the JSON scripts read; bad options get one clear line (also the named physics' detector,
+    which needs two runs a fold to name anything)."""
     from transparency_ros.cli import main  # noqa: PLC0415
 
     runs = [str(SHARED / f"pendubot_clean_0{k}.csv.xz") for k in (1, 2)]
     common = [*runs, "--urdf", str(SHARED / "pendubot.urdf"), "--folds", "2"]
-    assert main(["assay", *common, "--placements", "1"]) == 0
+    assert main(["assay", *common, "--placements", "1", "--detectors", "calibrated,textbook"]) == 0
     out = capsys.readouterr()
     assert "sensitivity assay on 2 runs without contact" in out.out
     for line in ("calibrated Joint1: ", "calibrated Joint2: ", "textbook Joint1: "):
@@ -176,9 +177,51 @@ def test_the_assay_from_the_command_line_on_the_real_double_pendulum(
     assert [s["joint"] for s in data["detectors"]["textbook"]] == ["Joint1", "Joint2"]
     for bad, message in (
         (["--folds", "3"], "2 run(s) for 3 folds"),
-        (["--detectors", "kalman"], "--detectors 'kalman': choose from calibrated, textbook"),
+        (
+            ["--detectors", "kalman"],
+            "--detectors 'kalman': choose from calibrated, named, textbook",
+        ),
         (["--widths", "0.05"], "--widths '0.05': two lengths in seconds"),
         (["--spacing", "0.1"], "pulse spacing 0.1 s"),
+        ([], "the robot discrepancy tool needs at least two runs"),  # named: 1 run a fold
     ):
         assert main(["assay", *common, *bad]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_the_observer_on_the_named_physics_carries_each_effect_where_it_acts() -> None:
+    """A chain whose motors act 4 ms late, with 0.1 N m more Coulomb friction on each joint
+    than its URDF says, and its second link 0.3 kg heavier at the link's tip: given those
+    effects (as the discrepancy tool's final model would hold them), the observer's residual
+    without contact peaks at a tenth of the URDF's own at most; the effects' torques (the
+    command delayed, the friction) and the payload (in the links' inertia) are each needed."""
+    from transparency_ros.analysis.discrepancy.robot_effects import library  # noqa: PLC0415
+
+    urdf = RobotModel.from_urdf(chain_urdf(2))
+    truth_urdf = chain_urdf(2, friction=0.15).replace(
+        '<link name="l1"><inertial><origin xyz="0 0 -0.1"/><mass value="0.5"/>',
+        '<link name="l1"><inertial><origin xyz="0 0 -0.14"/><mass value="0.8"/>',
+    )
+    truth = RobotModel.from_urdf(truth_urdf)
+    n = 4000
+    stamps, q, v, command = simulate_chain(truth, np.zeros((n, 2)), delay_steps=4)
+    run = JointRecording("run", stamps, urdf.joint_names, q, v, command)
+    effects = {e.name: e for e in library(urdf.joint_names, np.full(2, 5.0), np.full(2, 5.0))}
+    # the 0.3 kg the URDF lacks sits 0.2 m down link l1 (its centre of mass moves to 0.14 m)
+    payload = effects["payload[j1]"]
+    tip = np.linalg.lstsq(payload.frame, np.array([0.0, 0.0, -0.2]), rcond=None)[0]
+    named = [
+        (effects["command_delay"], np.array([0.0045])),
+        (effects["coulomb_friction[j0]"], np.array([0.1])),
+        (effects["coulomb_friction[j1]"], np.array([0.1])),
+        (payload, np.r_[0.3, tip]),
+    ]
+
+    def peak(fitted: list) -> np.ndarray:  # what a threshold must clear, per joint
+        residual = ra.named_detector(urdf, fitted, [run], 20.0).residual(run)[200:]
+        return np.abs(residual).max(axis=0)
+
+    everything = peak(named)
+    assert np.all(everything < 0.1 * peak([]))
+    for k in range(len(named)):  # each one is needed
+        assert np.any(peak(named[:k] + named[k + 1 :]) > 2 * everything)

@@ -34,7 +34,12 @@ from scipy.signal import savgol_filter
 from transparency_ros.analysis.robot_data import FloatArray, JointRecording
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.estimator import DetectorSettings, EventKind, SchmittDetector
-from transparency_ros.core.robot_calibration import SPEED_BANDS, Calibration, effort_limit
+from transparency_ros.core.robot_calibration import (
+    SPEED_BANDS,
+    Calibration,
+    banded_thresholds,
+    effort_limit,
+)
 from transparency_ros.core.robot_model import RobotModel
 from transparency_ros.core.robot_pipeline import ObserverPipeline
 
@@ -215,18 +220,7 @@ def _thresholds(
 ) -> list[list[float]]:
     """Per joint and speed band: the largest calibration residual times MARGIN, carried up to
     the faster bands (never lower at a higher speed)."""
-    bands = np.asarray(cal.speed_bands_rad_s)
-    blind = replace(cal, thresholds_nm=[[math.inf] * bands.size] * base.dof)  # no events
-    top = np.zeros((base.dof, bands.size))
-    seen = np.zeros(bands.size, dtype=bool)
-    for rec in recordings:
-        r, _ = run_pipeline(base, blind, rec)
-        speed = np.linalg.norm(rec.velocity, axis=1)
-        band = np.clip(np.searchsorted(bands, speed, side="right") - 1, 0, bands.size - 1)
-        for b in np.unique(band):
-            top[:, b] = np.maximum(top[:, b], np.abs(r[band == b]).max(axis=0))
-            seen[b] = True
-    top = np.maximum.accumulate(top, axis=1)
-    top[:, np.arange(bands.size) > np.flatnonzero(seen).max()] = np.inf
-    thresholds: list[list[float]] = (MARGIN * top).tolist()
-    return thresholds
+    blind = replace(cal, thresholds_nm=[[math.inf] * len(cal.speed_bands_rad_s)] * base.dof)
+    residuals = [run_pipeline(base, blind, rec)[0] for rec in recordings]  # (no events)
+    velocities = [rec.velocity for rec in recordings]
+    return banded_thresholds(residuals, velocities, cal.speed_bands_rad_s, MARGIN)

@@ -12,7 +12,7 @@ from transparency_ros.commands.detect import _common, _model, _recordings
 from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 
-DETECTORS = ("calibrated", "textbook")
+DETECTORS = ("calibrated", "named", "textbook")
 
 
 def register(subparsers: Any) -> None:
@@ -35,7 +35,9 @@ def register(subparsers: Any) -> None:
     a.add_argument(
         "--detectors",
         default=",".join(DETECTORS),
-        help=f"comma-separated, of {', '.join(DETECTORS)} (default both)",
+        help=f"comma-separated, of {', '.join(DETECTORS)} (default all): the calibrated "
+        "observer (as calibrate makes it), the observer on the URDF with what the discrepancy "
+        "tool names on the fold's other runs, the textbook observer (the URDF as it is)",
     )
     a.add_argument("--widths", default="0.05,0.1", help="pulse lengths, shortest,longest [s]")
     a.add_argument("--spacing", type=float, default=1.0, help="one pulse per joint per this [s]")
@@ -87,6 +89,12 @@ def run(args: argparse.Namespace) -> int:
                 say(f"fold {f + 1}/{args.folds}: calibrating on {len(fit)} runs ...")
             cal = given or calibrate(model, fit, args.gain)
             cases["calibrated"] += [(ra.calibrated_detector(model, cal), runs[i]) for i in held]
+        if "named" in cases:
+            fitted = _named(model, fit)
+            names = ", ".join(f"{e.name} {_values(e, p)}" for e, p in fitted) or "nothing"
+            say(f"fold {f + 1}/{args.folds}: the discrepancy tool names {names}")
+            named = ra.named_detector(model, fitted, fit, args.gain)
+            cases["named"] += [(named, runs[i]) for i in held]
         if "textbook" in cases:
             tb = ra.textbook_detector(model, args.gain, fit)
             cases["textbook"] += [(tb, runs[i]) for i in held]
@@ -109,6 +117,18 @@ def run(args: argparse.Namespace) -> int:
         for s in per_joint:
             print(f"{name} {s.joint}: {_line(s)}")
     return 0
+
+
+def _named(model: Any, runs: list[Any]) -> list[Any]:
+    """The effects (and their parameters) the discrepancy tool names on ``runs``."""
+    from transparency_ros.analysis.discrepancy.discover import Discoverer  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.robot import RobotProblem  # noqa: PLC0415
+
+    return list(Discoverer(RobotProblem(model, runs)).run().fitted)
+
+
+def _values(effect: Any, p: Any) -> str:
+    return ", ".join(f"{n} {v:.3g}" for n, v in zip(effect.param_names, p, strict=True))
 
 
 def _line(s: Any) -> str:

@@ -6,6 +6,7 @@ each joint's armature, friction and torque offset, and thresholds per band of sp
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,6 +25,43 @@ def effort_limit(model: RobotModel) -> FloatArray:
     """Each joint's effort limit from the URDF (inf where it gives none)."""
     limit = np.array(model.pin_model.effortLimit, dtype=float)
     return np.where(limit > 0, limit, np.inf)
+
+
+def speed_band(bands: Sequence[float], velocity: FloatArray) -> npt.NDArray[np.int64]:
+    """Per sample, the band of ``bands`` (their lower edges [rad/s]) its speed (the norm of
+    the joints' velocities) falls in."""
+    speed = np.linalg.norm(np.atleast_2d(velocity), axis=1)
+    band = np.searchsorted(np.asarray(bands), speed, side="right") - 1
+    out: npt.NDArray[np.int64] = np.clip(band, 0, len(bands) - 1).astype(np.int64)
+    return out
+
+
+def at_speed(thresholds_nm: Sequence[Sequence[float]], bands: Sequence[float],
+             velocity: FloatArray) -> FloatArray:  # fmt: skip
+    """Per sample and joint, the threshold of ``thresholds_nm`` (per joint, per band) at the
+    sample's speed, (samples, joints)."""
+    out: FloatArray = np.asarray(thresholds_nm, dtype=float).T[speed_band(bands, velocity)]
+    return out
+
+
+def banded_thresholds(residuals: Sequence[FloatArray], velocities: Sequence[FloatArray],
+                      bands: Sequence[float], margin: float) -> list[list[float]]:  # fmt: skip
+    """Per joint and speed band: the largest of ``residuals`` (runs without contact, each
+    (samples, joints) with its ``velocities``) in the band times ``margin``, carried up to the
+    faster bands (never lower at a higher speed); infinite above the fastest band seen (a
+    detector does not judge motion it has not seen without contact)."""
+    dof = residuals[0].shape[1]
+    top = np.zeros((dof, len(bands)))
+    seen = np.zeros(len(bands), dtype=bool)
+    for r, v in zip(residuals, velocities, strict=True):
+        band = speed_band(bands, v)
+        for b in np.unique(band):
+            top[:, b] = np.maximum(top[:, b], np.abs(r[band == b]).max(axis=0))
+            seen[b] = True
+    top = np.maximum.accumulate(top, axis=1)
+    top[:, np.arange(len(bands)) > np.flatnonzero(seen).max()] = np.inf
+    out: list[list[float]] = (margin * top).tolist()
+    return out
 
 
 @dataclass
@@ -64,11 +102,7 @@ class Calibration:
 
     def threshold(self, velocity: FloatArray) -> FloatArray:
         """Per sample and joint, the threshold at that sample's speed, (samples, joints)."""
-        speed = np.linalg.norm(np.atleast_2d(velocity), axis=1)
-        bands = np.clip(np.searchsorted(self.speed_bands_rad_s, speed, side="right") - 1, 0,
-                        len(self.speed_bands_rad_s) - 1)  # fmt: skip
-        out: FloatArray = np.asarray(self.thresholds_nm, dtype=float).T[bands]
-        return out
+        return at_speed(self.thresholds_nm, self.speed_bands_rad_s, velocity)
 
     def save(self, path: str | Path) -> None:
         data = {k: v for k, v in vars(self).items()}

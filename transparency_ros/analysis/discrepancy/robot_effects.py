@@ -100,6 +100,12 @@ class RobotEffect:
         """The torque the model leaves out, (samples, joints); None: none."""
         return None
 
+    def inertial(self, p: FloatArray, nominal: FloatArray) -> FloatArray | None:
+        """The change of the links' inertial parameters (Pinocchio's 10 per link, as
+        ``nominal``) this effect is, for a model that carries it (a detector's); None: the
+        effect is not one (its torque is not the rigid body's)."""
+        return None
+
 
 class CommandDelay(RobotEffect):
     """The motors act on the command ``delay_s`` late (the current loop, the bus); negative:
@@ -300,15 +306,19 @@ class Payload(_JointEffect):
         )  # fmt: skip
 
     def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
+        return np.asarray(ctx.regressor @ self.inertial(p, ctx.nominal), dtype=float)
+
+    def inertial(self, p: FloatArray, nominal: FloatArray) -> FloatArray:
         m, c = float(p[0]), self.frame @ np.asarray(p[1:], dtype=float)
         r2 = float(c @ c)
         # a point mass's 10 parameters: m, m c, and its inertia about the link's origin
         # (Pinocchio's order Ixx, Ixy, Iyy, Ixz, Iyz, Izz)
         inertia = m * (r2 * np.eye(3) - np.outer(c, c))
-        pi = np.r_[m, m * c, inertia[0, 0], inertia[0, 1], inertia[1, 1], inertia[0, 2],
-                   inertia[1, 2], inertia[2, 2]]  # fmt: skip
+        out = np.zeros(nominal.shape)
         k = 10 * self.index
-        return np.asarray(ctx.regressor[:, :, k : k + 10] @ pi, dtype=float)
+        out[k : k + 10] = np.r_[m, m * c, inertia[0, 0], inertia[0, 1], inertia[1, 1],
+                                inertia[0, 2], inertia[1, 2], inertia[2, 2]]  # fmt: skip
+        return out
 
 
 class ParameterDrift(_JointEffect):
@@ -324,9 +334,13 @@ class ParameterDrift(_JointEffect):
         self.term = self.TERMS[term]
 
     def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
-        k = 10 * self.index
-        part = ctx.regressor[:, :, k : k + 10][:, :, self.term] @ ctx.nominal[k : k + 10][self.term]
-        return np.asarray((float(p[0]) - 1.0) * part, dtype=float)
+        return np.asarray(ctx.regressor @ self.inertial(p, ctx.nominal), dtype=float)
+
+    def inertial(self, p: FloatArray, nominal: FloatArray) -> FloatArray:
+        out = np.zeros(nominal.shape)
+        part = slice(10 * self.index + self.term.start, 10 * self.index + self.term.stop)
+        out[part] = (float(p[0]) - 1.0) * nominal[part]
+        return out
 
 
 class EncoderLattice(_JointEffect):
