@@ -141,6 +141,7 @@ def test_the_calibrated_observer_detects_smaller_pulses_than_the_textbook_one() 
                 levels = [s.threshold_scale * d.threshold(r)[0, j] for d, r in cases]
                 largest = max(np.abs(d.residual(r)[:, j]).max() for d, r in cases)
                 rise = 1 - math.exp(-20.0 * (settings.widths_s[0] - 0.002))
+                assert min(levels) <= s.threshold_nm <= max(levels)
                 assert min(levels) - largest <= s.min_torque_nm
                 assert s.min_torque_nm <= (max(levels) + largest) / rise * 1.05
     for cal, tb in zip(found["calibrated"], found["textbook"], strict=True):

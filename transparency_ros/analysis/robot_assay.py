@@ -88,6 +88,7 @@ class Assayed:
 class JointSensitivity:
     joint: str
     threshold_scale: float  # the profile's factor at the operating point
+    threshold_nm: float  # there, the median over the runs' samples (where it judges)
     alarms_per_minute: float  # at that scale, on the runs without pulses
     minutes: float  # of runs the false alarms were counted on
     min_torque_nm: float | None  # None: not reached below ``largest_tried_nm``
@@ -204,8 +205,9 @@ def assay(
             + f" ({minutes:.2f} min of runs)"
         )
     # the largest amplitude worth trying: well above the threshold, within the effort limit
-    profile_top = np.max([np.nanmax(np.where(np.isfinite(p), p, np.nan), axis=0)
-                          for p in (det.threshold(rec) for det, rec in cases)], axis=0)  # fmt: skip
+    profiles = np.concatenate([det.threshold(rec) for det, rec in cases])
+    judged = np.where(np.isfinite(profiles), profiles, np.nan)
+    profile_top, profile_median = np.nanmax(judged, axis=0), np.nanmedian(judged, axis=0)
     hi = np.minimum(4.0 * scale * profile_top, limit_nm)
     lo = hi * 1e-2
     tried: list[list[tuple[float, float]]] = [[] for _ in joints]
@@ -231,7 +233,8 @@ def assay(
     for j, joint in enumerate(joints):
         s = best[j]
         out.append(JointSensitivity(
-            joint=joint, threshold_scale=float(scale[j]), alarms_per_minute=float(rate[j]),
+            joint=joint, threshold_scale=float(scale[j]),
+            threshold_nm=float(scale[j] * profile_median[j]), alarms_per_minute=float(rate[j]),
             minutes=minutes, min_torque_nm=float(hi[j]) if reached[j] else None,
             recall=s.recall, pulses=s.pulses,
             delay_median_s=s.delay_s(50) if reached[j] else math.nan,

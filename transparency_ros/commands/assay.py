@@ -132,8 +132,9 @@ def _values(effect: Any, p: Any) -> str:
 
 
 def _line(s: Any) -> str:
-    at = (f"threshold x{s.threshold_scale:.3g} ({s.alarms_per_minute:.2f} false alarms per "
-          f"minute), {s.pulses} pulses per amplitude")  # fmt: skip
+    at = (f"threshold {s.threshold_nm:.3g} N m (median; its own x{s.threshold_scale:.3g}, "
+          f"{s.alarms_per_minute:.2f} false alarms per minute), {s.pulses} pulses per "
+          "amplitude")  # fmt: skip
     if s.min_torque_nm is None:
         return (f"not reached: at {s.largest_tried_nm:.3g} N m (the most tried) "
                 f"{s.recall:.0%} found; {at}")  # fmt: skip
