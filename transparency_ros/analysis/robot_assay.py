@@ -31,7 +31,11 @@ from typing import Any
 import numpy as np
 
 from transparency_ros.analysis import robot_detect as rd
-from transparency_ros.analysis.discrepancy.robot_effects import Context
+from transparency_ros.analysis.discrepancy.robot_shooting import (
+    carrying,
+    command_path,
+    felt_torque,
+)
 from transparency_ros.analysis.robot_calibration import MARGIN, run_pipeline
 from transparency_ros.analysis.robot_data import FloatArray, JointRecording
 from transparency_ros.core.errors import ConfigError
@@ -40,7 +44,6 @@ from transparency_ros.core.robot_calibration import (
     Calibration,
     at_speed,
     banded_thresholds,
-    effort_limit,
 )
 from transparency_ros.core.robot_model import RobotModel
 
@@ -282,59 +285,19 @@ def named_detector(
 ) -> Assayed:
     """The momentum observer on the model the discrepancy tool names: the URDF with the
     effects of its final model (``fitted``: (effect, parameters), as its report has them),
-    each where its physics acts -- a payload or a link's drift in the links' inertial
-    parameters, a delay, gain or saturation on the command's path, friction, offsets and
-    cogging as torques the joint feels. Thresholds per speed band from ``clean`` (runs without
-    contact) as a calibration's are made."""
-    import pinocchio as pin  # noqa: PLC0415
-
-    pm = pin.Model(base.pin_model)
-    nominal = np.concatenate([pm.inertias[j].toDynamicParameters() for j in range(1, base.dof + 1)])
-    pi = nominal.copy()
-    for effect, p in fitted:
-        change = effect.inertial(p, nominal)
-        if change is not None:
-            pi += change
-    for j in range(base.dof):
-        pm.inertias[j + 1] = pin.Inertia.FromDynamicParameters(pi[10 * j : 10 * j + 10])
-    model = RobotModel(pm, base.friction, f"{base.source} + named effects", list(base.notes))
+    each where its physics acts (:mod:`robot_shooting`: payloads and a link's drift in the
+    links' inertial parameters, delays, gains and saturations on the command's path, friction,
+    offsets and cogging as torques the joint feels). Thresholds per speed band from ``clean``
+    (runs without contact) as a calibration's are made."""
+    model = carrying(base, fitted)
 
     def residual(rec: JointRecording) -> FloatArray:
-        return rd.observer_residual(model, rec, gain_per_s, named_torque(base, fitted, rec))
+        t = np.asarray(rec.stamps_ns * 1e-9, dtype=np.float64)
+        felt = felt_torque(base, fitted, rec.position, rec.velocity)
+        torque = command_path(base, fitted, t, rec.torque) - felt
+        return rd.observer_residual(model, rec, gain_per_s, torque)
 
     thresholds = banded_thresholds(
         [residual(r) for r in clean], [r.velocity for r in clean], SPEED_BANDS, MARGIN
     )
     return Assayed(residual, lambda rec: at_speed(thresholds, SPEED_BANDS, rec.velocity))
-
-
-def named_torque(
-    base: RobotModel, fitted: Sequence[tuple[Any, FloatArray]], rec: JointRecording
-) -> FloatArray:
-    """What the joints of ``rec`` get from their command with the named effects besides the
-    links' inertia: the command within the effort limits, delayed, through the gains and
-    saturations named, less the friction, offsets and cogging named, (samples, joints)."""
-    limit = effort_limit(base)
-    t = rec.stamps_ns * 1e-9
-    tau = np.clip(rec.torque, -limit, limit)
-    # a negative delay (the positions recorded late) takes the command ahead: offline only
-    delay = sum(effect.delay(p) for effect, p in fitted)
-    if delay != 0.0:
-        tau = np.stack([np.interp(t - delay, t, column) for column in tau.T], axis=1)
-    for effect, p in fitted:
-        if effect.stage == "command":
-            tau = effect.command(tau, p)
-    q = rec.position
-    ctx = Context(
-        rec.velocity,
-        np.tanh(rec.velocity / base.friction.smoothing_rad_s),
-        np.zeros((*q.shape, 0)),  # inertial effects are in the model, not here
-        np.zeros(0),
-        lambda j, n: np.stack([np.sin(n * q[:, j]), np.cos(n * q[:, j])], axis=1),
-    )
-    for effect, p in fitted:
-        if effect.inertial(p, np.zeros(10 * base.dof)) is None:
-            extra = effect.torque(ctx, p)
-            if extra is not None:
-                tau = tau - extra
-    return np.asarray(tau, dtype=float)

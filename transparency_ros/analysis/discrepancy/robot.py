@@ -38,6 +38,7 @@ from transparency_ros.analysis.discrepancy.robot_effects import (
     lattice_step,
     library,
 )
+from transparency_ros.analysis.discrepancy.robot_shooting import WINDOW_S, window_errors
 from transparency_ros.analysis.robot_data import JointRecording
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.core.robot_calibration import effort_limit
@@ -146,6 +147,7 @@ class RobotProblem:
         self.pi = np.concatenate(
             [pm.inertias[j].toDynamicParameters() for j in range(1, model.dof + 1)]
         )
+        self.held_recordings = [r for i, r in enumerate(runs) if i in held]
         self.fit_runs = [self._prepare(r) for i, r in enumerate(runs) if i not in held]
         self.held_runs = [self._prepare(r) for i, r in enumerate(runs) if i in held]
         self.floor_nm = self._floors(runs)
@@ -455,7 +457,8 @@ def robot_result(problem: RobotProblem, report: Any) -> dict[str, Any]:
     """The report as the robot tool's JSON: findings as {effect, joint (the URDF joint, None for
     the whole robot), parameters, confidence_interval, where, heldout_rmse_before / after (in
     noise floors), evidence, alternatives}, and per joint the held-out torque residual's RMS
-    [N m] before any effect and after all found."""
+    [N m] and the open-loop error of short simulated windows [rad] (:mod:`robot_shooting`),
+    before any effect and after all found."""
     by_name = {e.name: e for e, _p in report.fitted}
     findings = []
     for f in report.findings:
@@ -482,6 +485,13 @@ def robot_result(problem: RobotProblem, report: Any) -> dict[str, Any]:
         )
         for j, name in enumerate(problem.model.joint_names)
     }
+    held = problem.held_recordings
+    before_rad, windows, diverged_before = window_errors(problem.model, [], held)
+    after_rad, _, diverged_after = window_errors(problem.model, report.fitted, held)
+    open_loop = {
+        name: (float(before_rad[j]), float(after_rad[j]))
+        for j, name in enumerate(problem.model.joint_names)
+    }
     return {
         "findings": findings,
         "unexplained": report.unexplained,
@@ -489,8 +499,13 @@ def robot_result(problem: RobotProblem, report: Any) -> dict[str, Any]:
         "split": report.split,
         "heldout_rmse_unit": "noise floors",
         "heldout_rms_nm": rms,
+        "heldout_open_loop_rad": open_loop,
+        "open_loop": {
+            "window_s": WINDOW_S, "windows": windows,
+            "diverged_before": diverged_before, "diverged_after": diverged_after,
+        },
         "seconds": report.seconds,
-    }
+    }  # fmt: skip
 
 
 __all__ = ["RobotProblem", "robot_result"]
