@@ -95,7 +95,10 @@ def register(subparsers: Any) -> None:
         help="torque-driven (required): nominal terms (inertia_kgm2, viscous_nms_per_rad, "
         "coulomb_nm, gravity_nm, gravity_offset_rad) or a DFKI pendulum parameter file; "
         "drop tests (optional): overrides of reflected_inertia_kgm2, viscous_nms_per_rad, "
-        "coulomb_nm",
+        "coulomb_nm; robots (--urdf, optional): the URDF's terms overridden (gravity_mps2, "
+        "joints: {NAME: {armature_kgm2, viscous_nms_per_rad, coulomb_nm, effort_limit_nm}}, "
+        "links: {NAME: {mass_kg, com_m, inertia_com_kgm2}}) or a DFKI double-pendulum "
+        "parameter file",
     )
     d.add_argument("--window", type=float, default=0.1, metavar="S", help="window length [s]")
     d.add_argument("--json", action="store_true")
@@ -262,9 +265,14 @@ def _run_robot(args: argparse.Namespace) -> int:
     from transparency_ros.analysis.discrepancy.robot import RobotProblem, robot_result  # noqa: PLC0415
     from transparency_ros.commands.detect import _model, _recordings  # noqa: PLC0415
 
-    if args.nominal:
-        raise ConfigError("--nominal with --urdf: model overrides are not read yet (issue 27)")
     model = _model(args)
+    if args.nominal:
+        from transparency_ros.analysis.robot_nominal import with_nominal  # noqa: PLC0415
+
+        before = list(model.notes)
+        model = with_nominal(model, args.nominal)
+        for note in model.notes[len(before) :]:
+            print(f"note: {note}", file=sys.stderr)
     problem = RobotProblem(model, _recordings(args, model, args.bags))
     report = Discoverer(
         problem, progress=lambda text: print(text, file=sys.stderr, flush=True)
