@@ -221,12 +221,19 @@ def test_a_clamped_command_is_a_visible_disagreement(nodes: Any) -> None:
     assert wait_for(lambda: len(probe.estimates) > 100, 20.0), "no /estimated_effort"
     # both must hear it: a publisher that has matched a reader may still be unknown to it, so
     # a single message can be lost even then; five, and again until the driver has applied it
-    # (clamped), then the status after them
-    one_shot_until(["joint"], 0.7, lambda: abs(probe.last_setpoint() - 0.4) < 0.05,
-                   subscribers=2, times=5)  # fmt: skip
+    # (clamped), then the status after them -- and again while the estimator has not heard
+    # any (its status says so within a few seconds when it has; once, under a loaded suite,
+    # the driver heard the five and the estimator none, and nobody published again)
     probe.diagnostics.clear()
-    assert wait_for(lambda: "differs from the last /joint_commands" in probe.estimator_message(),
-                    10.0), probe.estimator_message()  # fmt: skip
+    for _ in range(4):
+        one_shot_until(["joint"], 0.7, lambda: abs(probe.last_setpoint() - 0.4) < 0.05,
+                       subscribers=2, times=5)  # fmt: skip
+        if wait_for(lambda: "differs from the last /joint_commands"
+                    in probe.estimator_message(), 5.0):  # fmt: skip
+            break
+    assert "differs from the last /joint_commands" in probe.estimator_message(), (
+        probe.estimator_message()
+    )
     values = probe.estimator_values()
     assert float(values["theta_d_gap_max_rad"]) == pytest.approx(0.3, abs=1e-6), values
     assert values["theta_d_gap_joint"] == "joint"

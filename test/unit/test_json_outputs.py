@@ -58,6 +58,7 @@ def test_every_json_output_parses_strictly(tmp_path: Path) -> None:
     bags = tmp_path / "T2822"
     shutil.copytree(ROOT / "bags" / "T2822", bags)
     pendubot = [str(SHARED / f"pendubot_{n}.csv.xz") for n in ("clean_01", "pert_01")]
+    pendubot_clean = [str(SHARED / f"pendubot_clean_0{k}.csv.xz") for k in (1, 2)]
     cases = {
         "model": [["model", "--actuator", "U10GB", "--energy", "0.001", "1"],
                   ["model", "--curves", "--points", "20"]],
@@ -67,7 +68,10 @@ def test_every_json_output_parses_strictly(tmp_path: Path) -> None:
         "eval": [["eval", str(bags)]],
         "salvage": [["salvage", str(BAGS / "rosbag2_jazzy_mcap_cdr_test_v7"), "--out",
                      str(tmp_path / "salvaged")]],
-        "discrepancy": [["discrepancy", str(bags)]],
+        "discrepancy": [["discrepancy", str(bags)],
+                        ["discrepancy", *pendubot_clean, "--urdf", str(SHARED / "pendubot.urdf")]],
+        "assay": [["assay", *pendubot_clean, "--urdf", str(SHARED / "pendubot.urdf"), "--folds",
+                   "2", "--placements", "1", "--detectors", "textbook"]],
         "detect": [["detect", pendubot[1], "--urdf", str(SHARED / "pendubot.urdf"), "--method",
                     "textbook", "--clean", pendubot[0], "--labels", "tau_pert{}"]],
     }  # fmt: skip
