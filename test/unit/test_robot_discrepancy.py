@@ -55,6 +55,21 @@ class _Cogged(_Gained):
         return self.model.forward_dynamics(q, v, tau)
 
 
+class _Sticky(_Gained):
+    """The chain whose ``joint`` has Stribeck friction beyond its URDF's: s exp(-(q'/v_s)^2)
+    sign(q') against its motion."""
+
+    def __init__(self, model: RobotModel, joint: int, static_nm: float, speed: float) -> None:
+        super().__init__(model, joint, 1.0)
+        self.static_nm, self.speed = static_nm, speed
+
+    def forward_dynamics(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        tau = tau.copy()
+        w = v[self.joint]
+        tau[self.joint] -= self.static_nm * math.exp(-((w / self.speed) ** 2)) * math.tanh(w / 0.01)
+        return self.model.forward_dynamics(q, v, tau)
+
+
 def runs(
     truth: object, names: tuple[str, ...], *, delay_steps: int = 0, encoder: float = ENCODER_RAD
 ) -> list[JointRecording]:
@@ -121,6 +136,27 @@ def test_a_motors_cogging_is_named_with_its_period_and_size(urdf: RobotModel) ->
     cogging = named[f"cogging[{names[0]}]"]
     assert cogging["periods_per_rev"] == 8
     assert cogging["amplitude_nm"] == pytest.approx(0.3, rel=0.1)
+
+
+@pytest.mark.parametrize("speed", [1.0, 0.3])
+def test_a_joints_stiction_is_named_with_its_level_and_speed(
+    urdf: RobotModel, speed: float
+) -> None:
+    """0.4 N m more friction near rest on the first joint, falling off over ``speed`` (its own
+    sign law, five times sharper than the tool's): named as stiction there and nothing else.
+    Falling off over 1 rad/s, its level and speed are named within a fifth; over 0.3 rad/s the
+    joint passes through those speeds in a few milliseconds at each reversal, and what the
+    motion shows is the fall-off's impulse, level times speed (within 15 %), not each."""
+    names = urdf.joint_names
+    named = found(RobotProblem(urdf, runs(_Sticky(urdf, 0, 0.4, speed), names)))
+    assert set(named) - {"command_delay"} == {f"stiction[{names[0]}]"}, named
+    stiction = named[f"stiction[{names[0]}]"]
+    if speed == 1.0:
+        assert stiction["static_nm"] == pytest.approx(0.4, rel=0.2)
+        assert stiction["stribeck_rad_s"] == pytest.approx(speed, rel=0.2)
+    else:
+        impulse = stiction["static_nm"] * stiction["stribeck_rad_s"]
+        assert impulse == pytest.approx(0.4 * speed, rel=0.15)
 
 
 def test_a_payload_on_the_last_link_is_named_with_its_mass(urdf: RobotModel) -> None:

@@ -121,6 +121,7 @@ class _Run:
     applied: FloatArray  # the command, filtered, at the compared points (no effect)
     nominal: FloatArray  # the URDF's side of the balance there
     q_wide: FloatArray  # (grid, joints) the positions on the filter's grid (low-passed wide)
+    v_wide: FloatArray  # (grid, joints) their central differences
     waves: dict[tuple[int, int], FloatArray] = field(default_factory=dict)  # Context.wave's
 
 
@@ -234,7 +235,7 @@ class RobotProblem:
         nominal = regressor @ self.pi + friction.viscous * v[keep] + friction.coulomb * sliding
         return _Run(
             rec.name, grid[keep], q[keep], v[keep], regressor, sliding, t, command, grid, keep,
-            applied, nominal, q,
+            applied, nominal, q, np.gradient(q, GRID_S, axis=0),
         )  # fmt: skip
 
     def _floors(self, recordings: Sequence[JointRecording]) -> FloatArray:
@@ -300,6 +301,13 @@ class RobotProblem:
             run.waves[key] = _low_pass(both)[run.keep]
         return run.waves[key]
 
+    def _stribeck(self, run: _Run, joint: int, speed: float) -> FloatArray:
+        """exp(-(q' / speed)^2) tanh(q' / eps) of the joint on the full grid, low-passed as the
+        balance is, at the compared points."""
+        v = run.v_wide[:, joint]
+        shape = np.exp(-((v / speed) ** 2)) * np.tanh(v / self.model.friction.smoothing_rad_s)
+        return _low_pass(shape)[run.keep]
+
     def balance(
         self, run: _Run, effects: Sequence[Any], params: Sequence[FloatArray]
     ) -> tuple[FloatArray, FloatArray]:
@@ -317,7 +325,12 @@ class RobotProblem:
             applied = _low_pass(tau)[run.keep]
         model = run.nominal
         ctx = Context(
-            run.v, run.sliding, run.regressor, self.pi, lambda j, n: self._wave(run, j, n)
+            run.v,
+            run.sliding,
+            run.regressor,
+            self.pi,
+            lambda j, n: self._wave(run, j, n),
+            lambda j, speed: self._stribeck(run, j, speed),
         )
         for e, p in zip(effects, params, strict=True):
             extra = e.torque(ctx, p)

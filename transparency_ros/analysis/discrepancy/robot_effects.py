@@ -33,6 +33,7 @@ GAIN_RANGE = (0.2, 5.0)  # a torque constant this far off at most
 PAYLOAD_MOST = 2.0  # a payload up to this times the mass the joint moves (its subtree)
 PAYLOAD_LEAST_KG = 0.1  # (the bound on the payload of a very light link)
 COM_MOST_M = 2.0
+STRIBECK_RAD_S = (0.01, 2.0)  # the speeds a Stribeck fall-off is looked for between
 
 
 @dataclass
@@ -46,6 +47,9 @@ class Context:
     # (joint, cycles per revolution) -> (samples, 2): sin and cos of cycles * q of the joint,
     # computed on the full grid and low-passed as the balance is
     wave: Callable[[int, int], FloatArray]
+    # (joint, Stribeck speed v_s) -> (samples,): exp(-(q'/v_s)^2) tanh(q'/eps) of the joint,
+    # computed on the full grid and low-passed as the balance is
+    stribeck: Callable[[int, float], FloatArray]
 
 
 class RobotEffect:
@@ -275,6 +279,29 @@ class Cogging(_JointEffect):
         return self._one(ctx, amplitude * (math.cos(phase) * w[:, 0] + math.sin(phase) * w[:, 1]))
 
 
+class Stiction(_JointEffect):
+    """Friction above the Coulomb level near rest, falling off with speed (Stribeck):
+    ``static_nm`` exp(-(q' / v_s)^2) sign(q'), ``stribeck_rad_s`` = v_s (negative: the model
+    has too much)."""
+
+    def __init__(self, joint: int, name: str, largest_nm: float) -> None:
+        top = max(largest_nm, 1e-6)
+        super().__init__(
+            "stiction", joint, name, ("static_nm", "stribeck_rad_s"), (-top, STRIBECK_RAD_S[0]),
+            (top, STRIBECK_RAD_S[1]), (0.0, math.nan), (0.0, 0.2),
+        )  # fmt: skip
+
+    def meaningful(self, p: FloatArray) -> bool:
+        # the speed means nothing without a level: the level is checked, and the speed off its
+        # bounds (held there it stands in for a Coulomb friction, or for noise)
+        return not pinned(np.abs(p[:1]), self.lower[:1], self.upper[:1]) and not pinned(
+            p[1:], self.lower[1:], self.upper[1:]
+        )
+
+    def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
+        return self._one(ctx, float(p[0]) * ctx.stribeck(self.index, float(p[1])))
+
+
 class Payload(_JointEffect):
     """A point mass ``mass_kg`` fixed to the link the joint moves, its weight and inertia
     through the link's regressor columns. Where it sits is fitted in the plane through the
@@ -440,6 +467,7 @@ def library(
             TorqueSaturation(j, name, top),
             TorqueOffset(j, name, top),
             CoulombFriction(j, name, top),
+            Stiction(j, name, top),
             ViscousFriction(j, name, top / max(float(fastest[j]), 1e-3)),
             Cogging(j, name, top),
             Payload(

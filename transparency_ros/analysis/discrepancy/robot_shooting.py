@@ -74,6 +74,9 @@ def felt_torque(base: RobotModel, fitted: Fitted, q: FloatArray, v: FloatArray) 
         np.zeros((*q.shape, 0)),  # inertial effects are in the model (``carrying``), not here
         np.zeros(0),
         lambda j, n: np.stack([np.sin(n * q[:, j]), np.cos(n * q[:, j])], axis=1),
+        lambda j, speed: (
+            np.exp(-((v[:, j] / speed) ** 2)) * np.tanh(v[:, j] / base.friction.smoothing_rad_s)
+        ),
     )
     out = np.zeros(q.shape)
     for effect, p in fitted:
