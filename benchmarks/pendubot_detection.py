@@ -11,6 +11,9 @@ disturbed runs (never calibrated on). Detectors:
 
 * calibrated momentum observer (``transparency calibrate`` / ``detect``), thresholds growing
   with speed;
+* named physics: the momentum observer on the URDF carrying what the discrepancy tool names on
+  the 9 calibration runs (``transparency assay``'s named detector), thresholds per speed band
+  from them;
 * textbook momentum observer: the lab's URDF as it is, the command as applied, one threshold
   per joint just above its largest residual on the 9 calibration runs;
 * eq. (1)'s signal, pos_des - pos_meas: only 2 clean and 3 disturbed runs record pos_des;
@@ -32,6 +35,9 @@ from pathlib import Path
 from typing import Any
 
 from transparency_ros.analysis import robot_detect as rd
+from transparency_ros.analysis.discrepancy.discover import Discoverer
+from transparency_ros.analysis.discrepancy.robot import RobotProblem
+from transparency_ros.analysis.robot_assay import named_detector
 from transparency_ros.analysis.robot_calibration import calibrate
 from transparency_ros.analysis.robot_data import read_joint_csv
 from transparency_ros.core.robot_model import RobotModel
@@ -42,13 +48,37 @@ from _results import write_results
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "external" / "double_pendulum"
 
 
-def run_gain(base: RobotModel, clean: list[Any], pert: list[Any], gain: float) -> dict[str, Any]:
+METHODS = ("calibrated", "named", "textbook")
+
+
+def named_fits(base: RobotModel, clean: list[Any]) -> list[Any]:
+    """Per fold (leave run k out), what the discrepancy tool names on the other clean runs."""
+    out = []
+    for k in range(len(clean)):
+        train = [r for i, r in enumerate(clean) if i != k]
+        out.append(list(Discoverer(RobotProblem(base, train)).run().fitted))
+        names = ", ".join(f"{e.name} {[round(float(x), 3) for x in p]}" for e, p in out[-1])
+        print(f"fold {k + 1}: named {names or 'nothing'}", file=sys.stderr, flush=True)
+    return out
+
+
+def run_gain(base: RobotModel, clean: list[Any], pert: list[Any], gain: float,
+             fits: list[Any]) -> dict[str, Any]:  # fmt: skip
     rows: dict[str, dict[str, list[rd.Score]]] = {
-        m: {"held_clean": [], "pert": [], "chance": []} for m in ("calibrated", "textbook")
+        m: {"held_clean": [], "pert": [], "chance": []} for m in METHODS
     }
     for k in range(len(clean)):
         train = [r for i, r in enumerate(clean) if i != k]
         held = clean[k]
+        named = named_detector(base, fits[k], train, gain)
+
+        def onsets(rec: Any, detector: Any = named) -> rd.Detection:
+            return rd.detect(rec, detector.residual(rec), detector.threshold(rec))
+
+        rows["named"]["held_clean"].append(rd.score([onsets(held)], [held]))
+        detections = [onsets(r) for r in pert]
+        rows["named"]["pert"].append(rd.score(detections, pert))
+        rows["named"]["chance"].append(rd.by_chance(detections, pert))
         cal = calibrate(base, train, gain)
         rows["calibrated"]["held_clean"].append(rd.score([rd.calibrated(base, cal, held)], [held]))
         detections = [rd.calibrated(base, cal, r) for r in pert]
@@ -109,8 +139,9 @@ def main(argv: list[str] | None = None) -> int:
         "|---|---|---|---|---|---|---|---|",
     ]
     data: dict[str, Any] = {}
+    fits = named_fits(base, clean)
     for gain in args.gains:
-        result = run_gain(base, clean, pert, gain)
+        result = run_gain(base, clean, pert, gain, fits)
         data[f"{gain:g}"] = {
             m: {
                 k: {
@@ -125,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
             }
             for m, parts in result.items()
         }
-        for method in ("calibrated", "textbook"):
+        for method in METHODS:
             parts = result[method]
             clean_fa = parts["held_clean"].alarms_per_minute
             chance = parts["chance"]
