@@ -93,6 +93,24 @@ def test_a_bad_nominal_file_is_refused_naming_what_and_where(
         with_nominal(RobotModel.from_urdf(chain_urdf(2)), spec)
 
 
+def test_the_labs_file_needs_no_lengths_and_notes_one_the_urdf_disagrees_with(
+    tmp_path: Path,
+) -> None:
+    urdf = RobotModel.from_urdf(SHARED / "pendubot.urdf")
+    text = (SHARED / "model_parameters.yml").read_text()
+    without = tmp_path / "no_lengths.yml"
+    without.write_text("".join(x + "\n" for x in text.splitlines() if not x.startswith("l")))
+    same = with_nominal(urdf, SHARED / "model_parameters.yml")
+    q = np.array([0.3, 0.5])
+    assert with_nominal(urdf, without).mass_matrix(q) == pytest.approx(same.mass_matrix(q))
+    assert not any("l1" in n for n in same.notes)  # 0.2 m, as the URDF has it
+    longer = tmp_path / "longer.yml"
+    longer.write_text(text.replace("l1: 0.2", "l1: 0.3"))
+    assert any(
+        "l1 0.3 m, the URDF's joint 2 is 0.2 m" in n for n in with_nominal(urdf, longer).notes
+    )
+
+
 def test_the_labs_file_is_refused_for_a_robot_of_three_joints() -> None:
     with pytest.raises(ConfigError, match="has 3 movable joints"):
         with_nominal(RobotModel.from_urdf(chain_urdf(3)), SHARED / "model_parameters.yml")

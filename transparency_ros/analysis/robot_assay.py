@@ -224,9 +224,10 @@ def assay(
         scores = _recall(cases, scale, mid, settings)
         for j, s in enumerate(scores):
             tried[j].append((float(mid[j]), s.recall))
-            if s.recall >= settings.recall:
+            if s.recall >= settings.recall:  # (also where the largest tried fell short)
                 hi[j] = mid[j]
                 best[j] = s
+                reached[j] = True
             else:
                 lo[j] = mid[j]
         if progress:

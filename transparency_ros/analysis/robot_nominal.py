@@ -188,8 +188,8 @@ def _dfki(model: RobotModel, data: Mapping[str, Any], p: Path) -> RobotModel:
         coulomb[j] = number(f"cf{i}", 0.0) * math.pi / 2
         if f"tl{i}" in data:
             pm.effortLimit[v] = number(f"tl{i}", 0.0)
-        length = number(f"l{i}", math.nan)
-        if i == 1 and math.isfinite(length):
+        if i == 1 and "l1" in data:  # the URDF's geometry is kept: a note where they differ
+            length = number("l1", 0.0)
             reach = np.array(pm.jointPlacements[2].translation)
             across_reach = float(np.linalg.norm(reach - axis * float(axis @ reach)))
             if abs(across_reach - length) > 0.05 * length:
