@@ -133,3 +133,20 @@ def test_the_discrepancy_tool_starts_from_the_nominal_model(
     assert "note: model_parameters.yml: the rotor's inertia" in out.err
     for joint in ("Joint1", "Joint2"):
         assert lab[joint][0] < urdf[joint][0]
+
+
+def test_the_assay_starts_from_the_nominal_model_too(capsys: pytest.CaptureFixture[str]) -> None:
+    """The textbook observer on the lab's model needs a lower threshold than on the URDF."""
+    from transparency_ros.cli import main  # noqa: PLC0415
+
+    runs = [str(SHARED / f"pendubot_clean_0{k}.csv.xz") for k in (1, 2)]
+    common = ["assay", *runs, "--urdf", str(SHARED / "pendubot.urdf"), "--folds", "2",
+              "--placements", "1", "--detectors", "textbook", "--json"]  # fmt: skip
+    assert main(common) == 0
+    urdf = json.loads(capsys.readouterr().out)["detectors"]["textbook"]
+    assert main([*common, "--nominal", str(SHARED / "model_parameters.yml")]) == 0
+    out = capsys.readouterr()
+    lab = json.loads(out.out)["detectors"]["textbook"]
+    assert "note: model_parameters.yml: the rotor's inertia" in out.err
+    for a, b in zip(lab, urdf, strict=True):
+        assert a["threshold_nm"] < b["threshold_nm"]

@@ -31,6 +31,12 @@ def register(subparsers: Any) -> None:
     )
     _common(a)
     a.add_argument("--calibration", help="a calibration YAML made on other runs (see calibrate)")
+    a.add_argument(
+        "--nominal",
+        metavar="SPEC.yaml",
+        help="start from another model than the URDF's as it is (as discrepancy --nominal: a "
+        "file of overrides or a DFKI double-pendulum parameter file)",
+    )
     a.add_argument("--folds", type=int, default=3, help="folds by run (default 3)")
     a.add_argument(
         "--detectors",
@@ -72,14 +78,15 @@ def run(args: argparse.Namespace) -> int:
     if unknown or not detectors:
         raise ConfigError(f"--detectors {args.detectors!r}: choose from {', '.join(DETECTORS)}")
     settings = _settings(args)
-    model = _model(args)
+
+    def say(message: str) -> None:
+        print(message, file=sys.stderr, flush=True)
+
+    model = _model(args)  # (with --nominal's terms)
     runs = _recordings(args, model, args.recordings)
     given = Calibration.load(args.calibration) if args.calibration else None
     if given is not None:
         given.model(model)  # a calibration of another robot: one clear line
-
-    def say(message: str) -> None:
-        print(message, file=sys.stderr, flush=True)
 
     cases: dict[str, list[Any]] = {d: [] for d in detectors}
     for f, (train, held) in enumerate(ra.folds(runs, args.folds)):

@@ -97,9 +97,15 @@ def register(subparsers: Any) -> None:
 
 
 def _model(args: argparse.Namespace) -> Any:
+    """The robot's model from ``--urdf``, with ``--nominal``'s terms where the command has it
+    (discrepancy, assay); its notes on stderr."""
     from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
 
     model = RobotModel.from_urdf(args.urdf)
+    if getattr(args, "nominal", None):
+        from transparency_ros.analysis.robot_nominal import with_nominal  # noqa: PLC0415
+
+        model = with_nominal(model, args.nominal)
     for note in model.notes:
         print(f"note: {note}", file=sys.stderr)
     return model

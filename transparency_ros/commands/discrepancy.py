@@ -265,14 +265,7 @@ def _run_robot(args: argparse.Namespace) -> int:
     from transparency_ros.analysis.discrepancy.robot import RobotProblem, robot_result  # noqa: PLC0415
     from transparency_ros.commands.detect import _model, _recordings  # noqa: PLC0415
 
-    model = _model(args)
-    if args.nominal:
-        from transparency_ros.analysis.robot_nominal import with_nominal  # noqa: PLC0415
-
-        before = list(model.notes)
-        model = with_nominal(model, args.nominal)
-        for note in model.notes[len(before) :]:
-            print(f"note: {note}", file=sys.stderr)
+    model = _model(args)  # (with --nominal's terms)
     problem = RobotProblem(model, _recordings(args, model, args.bags))
     report = Discoverer(
         problem, progress=lambda text: print(text, file=sys.stderr, flush=True)
