@@ -35,9 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from transparency_ros.analysis import robot_detect as rd
-from transparency_ros.analysis.discrepancy.discover import Discoverer
-from transparency_ros.analysis.discrepancy.robot import RobotProblem
-from transparency_ros.analysis.robot_assay import named_detector
+from transparency_ros.analysis.robot_assay import named_detector, named_effects
 from transparency_ros.analysis.robot_calibration import calibrate
 from transparency_ros.analysis.robot_data import read_joint_csv
 from transparency_ros.core.robot_model import RobotModel
@@ -56,7 +54,7 @@ def named_fits(base: RobotModel, clean: list[Any]) -> list[Any]:
     out = []
     for k in range(len(clean)):
         train = [r for i, r in enumerate(clean) if i != k]
-        out.append(list(Discoverer(RobotProblem(base, train)).run().fitted))
+        out.append(named_effects(base, train))
         names = ", ".join(f"{e.name} {[round(float(x), 3) for x in p]}" for e, p in out[-1])
         print(f"fold {k + 1}: named {names or 'nothing'}", file=sys.stderr, flush=True)
     return out

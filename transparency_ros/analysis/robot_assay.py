@@ -278,6 +278,14 @@ def folds(runs: Sequence[JointRecording], count: int) -> list[tuple[list[int], l
             for f in range(count)]  # fmt: skip
 
 
+def named_effects(base: RobotModel, runs: Sequence[JointRecording]) -> list[Any]:
+    """What the discrepancy tool names on ``runs`` (its final model's (effect, parameters))."""
+    from transparency_ros.analysis.discrepancy.discover import Discoverer  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.robot import RobotProblem  # noqa: PLC0415
+
+    return list(Discoverer(RobotProblem(base, runs)).run().fitted)
+
+
 def named_detector(
     base: RobotModel,
     fitted: Sequence[tuple[Any, FloatArray]],

@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
             cal = given or calibrate(model, fit, args.gain)
             cases["calibrated"] += [(ra.calibrated_detector(model, cal), runs[i]) for i in held]
         if "named" in cases:
-            fitted = _named(model, fit)
+            fitted = ra.named_effects(model, fit)
             names = ", ".join(f"{e.name} {_values(e, p)}" for e, p in fitted) or "nothing"
             say(f"fold {f + 1}/{args.folds}: the discrepancy tool names {names}")
             named = ra.named_detector(model, fitted, fit, args.gain)
@@ -124,14 +124,6 @@ def run(args: argparse.Namespace) -> int:
         for s in per_joint:
             print(f"{name} {s.joint}: {_line(s)}")
     return 0
-
-
-def _named(model: Any, runs: list[Any]) -> list[Any]:
-    """The effects (and their parameters) the discrepancy tool names on ``runs``."""
-    from transparency_ros.analysis.discrepancy.discover import Discoverer  # noqa: PLC0415
-    from transparency_ros.analysis.discrepancy.robot import RobotProblem  # noqa: PLC0415
-
-    return list(Discoverer(RobotProblem(model, runs)).run().fitted)
 
 
 def _values(effect: Any, p: Any) -> str:

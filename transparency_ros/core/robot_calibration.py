@@ -27,12 +27,12 @@ def effort_limit(model: RobotModel) -> FloatArray:
     return np.where(limit > 0, limit, np.inf)
 
 
-def speed_band(bands: Sequence[float], velocity: FloatArray) -> npt.NDArray[np.int64]:
+def speed_band(bands: Sequence[float], velocity: FloatArray) -> npt.NDArray[np.intp]:
     """Per sample, the band of ``bands`` (their lower edges [rad/s]) its speed (the norm of
     the joints' velocities) falls in."""
     speed = np.linalg.norm(np.atleast_2d(velocity), axis=1)
-    band = np.searchsorted(np.asarray(bands), speed, side="right") - 1
-    out: npt.NDArray[np.int64] = np.clip(band, 0, len(bands) - 1).astype(np.int64)
+    band = np.searchsorted(bands, speed, side="right") - 1
+    out: npt.NDArray[np.intp] = np.clip(band, 0, len(bands) - 1)
     return out
 
 

@@ -225,7 +225,7 @@ class RobotProblem:
         regressor = _low_pass(full.reshape(grid.size, -1))[keep].reshape(keep.size, n, -1)
         smoothing = self.model.friction.smoothing_rad_s
         sliding = _low_pass(np.tanh(v / smoothing))[keep]
-        v = _low_pass(v)
+        v_wide, v = v, _low_pass(v)
         limit = effort_limit(self.model)
         command = np.clip(rec.torque, -limit, limit)
         # both sides as the URDF has them, made once: most candidates change neither the
@@ -235,7 +235,7 @@ class RobotProblem:
         nominal = regressor @ self.pi + friction.viscous * v[keep] + friction.coulomb * sliding
         return _Run(
             rec.name, grid[keep], q[keep], v[keep], regressor, sliding, t, command, grid, keep,
-            applied, nominal, q, np.gradient(q, GRID_S, axis=0),
+            applied, nominal, q, v_wide,
         )  # fmt: skip
 
     def _floors(self, recordings: Sequence[JointRecording]) -> FloatArray:
