@@ -94,7 +94,7 @@ def test_cell_through_the_nodes_matches_the_paper_and_the_core(
     latency = run.t_torque_s if run.t_torque_s is not None else record.t_process_s
     at = {
         t: sim.simulate_cell(actuator, ball, replace(setup, process_time_s=t), sweep).outcome
-        for t in (latency - LATENCY_EARLY_S, latency, latency + LATENCY_LATE_S)
+        for t in (max(0.0, latency - LATENCY_EARLY_S), latency, latency + LATENCY_LATE_S)
     }
     assert record.outcome in at.values(), (record, run.t_torque_s, at)
     if record.outcome is fc.Outcome.FEEL_AND_CAGE:
