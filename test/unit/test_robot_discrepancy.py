@@ -308,3 +308,18 @@ def test_a_joints_own_effect_is_judged_on_its_own_row_and_a_links_on_the_rows_ab
         assert np.array_equal(mask, joints == row), name
     for name in ("payload[j1]", "command_delay"):
         assert problem.sensor_scope([cand[name]]) is None, name
+
+
+def test_a_delay_is_judged_on_the_rows_of_the_joints_commanded(urdf: RobotModel) -> None:
+    """A pendubot's elbow has no command: a delay of the command (or of the states against
+    it) changes the shoulder's row of the balance only, and is judged there."""
+    recs = runs(urdf, urdf.joint_names)
+    for r in recs:
+        r.torque[:, 1] = 0.0  # (the scope is structural: the motion does not matter)
+    problem = RobotProblem(urdf, recs)
+    joints = np.tile([0, 1], problem.error([], [], True).size // 2)
+    cand = {c.name: c for c in problem.candidates()}
+    for name in ("command_delay", "sensor_delay"):
+        scope = problem.sensor_scope([cand[name]])
+        assert scope is not None, name
+        assert np.array_equal(scope[0], joints == 0), name

@@ -158,6 +158,8 @@ class RobotProblem:
             [np.maximum(np.max(np.abs(r.command), axis=0), np.max(np.abs(r.nominal), axis=0))
              for r in self.fit_runs], axis=0,
         )  # fmt: skip
+        # the joints with a command (a pendubot's elbow has none)
+        self.driven = np.any([np.any(r.command != 0.0, axis=0) for r in self.fit_runs], axis=0)
         fastest = np.max([np.max(np.abs(r.v), axis=0) for r in self.fit_runs], axis=0)
         self._candidates = library(
             tuple(model.joint_names), largest, fastest, _axes(pm), _moved_kg(pm)
@@ -367,14 +369,21 @@ class RobotProblem:
         """The held-out elements of the joints ``effects`` act on, on which they are judged:
         a joint's own effect (its gain, friction, offset) changes its own row of the balance
         only, a link's (payload, drift) the rows of the joint that moves it and of that
-        joint's ancestors; the command delay every row (None: all of the error). Judged on
-        all joints, an effect of one joint had to remove half of every joint's error."""
+        joint's ancestors; a delay (the command against the states) the rows of the joints
+        commanded (None: all of the error). Judged on all joints, an effect of one joint had
+        to remove half of every joint's error, and a pendubot's delay half of the passive
+        elbow's, which no delay changes."""
         rows: set[int] = set()
         for e in effects:
+            if e.joint is None and e.stage == "delay":
+                # the command shifted against the states (either delay, the balance's same
+                # shift): it changes the rows of the joints commanded only
+                rows |= {j for j in range(self.model.dof) if self.driven[j]}
+                continue
             if e.joint is None:
                 return None
             rows |= self._acting_rows(e)
-        if len(rows) == self.model.dof:
+        if len(rows) in (0, self.model.dof):  # (no joint commanded: all of it)
             return None
         mask = np.zeros(self.model.dof, dtype=bool)
         mask[sorted(rows)] = True
