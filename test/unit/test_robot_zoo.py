@@ -80,3 +80,19 @@ def test_the_generator_runs_a_robot_and_conceals_its_effect() -> None:
     assert set(plain[0]) >= {"time", "pos_meas1", "pos_meas2", "tau_con1", "tau_con2"}
     assert len(plain[0]["time"]) == 200  # 400 Hz
     assert np.max(np.abs(plain[0]["pos_meas2"] - offset[0]["pos_meas2"])) > 1e-3
+
+
+def test_physics_no_candidate_describes_is_drawn_apart_and_changes_the_motion() -> None:
+    """``make --model-error``: the robot of a seed is the same with it, plus the unmodelled
+    physics (load-dependent friction, an elbow cable), which moves it differently."""
+    plain, with_error = robot_zoo.draw(7), robot_zoo.draw(7, model_error=True)
+    assert {k: v for k, v in with_error.items() if k != "unmodelled"} == plain
+    assert set(with_error["unmodelled"]) == {"load_friction", "cable_nm_per_rad", "cable_rest_rad"}
+    robot = _robot()
+    moved = robot_zoo.simulate(robot, runs=2, duration_s=0.5)
+    robot["unmodelled"] = with_error["unmodelled"]
+    cabled = robot_zoo.simulate(robot, runs=2, duration_s=0.5)
+    assert np.max(np.abs(moved[0]["pos_meas2"] - cabled[0]["pos_meas2"])) > 1e-3
+    # neither required nor allowed: whatever the tool names for it is a false finding
+    truth = robot_zoo.answers(robot)
+    assert not any("cable" in k or "load" in k for k in [*truth["required"], *truth["allowed"]])
