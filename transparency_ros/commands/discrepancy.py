@@ -292,10 +292,9 @@ def _run_robot(args: argparse.Namespace) -> int:
     window = result["open_loop"]["window_s"]
     for joint, (before, after) in result["heldout_rms_nm"].items():
         sim_before, sim_after = result["heldout_open_loop_rad"][joint]
-        print(f"{joint}: held-out torque residual {before:.3g} -> {after:.3g} N m RMS "
-              f"(all candidates' linear shapes at once: {result['heldout_span_rms_nm'][joint]:.3g}"
-              f"); open-loop error over {window:g} s windows {sim_before:.3g} -> "
-              f"{sim_after:.3g} rad RMS")  # fmt: skip
+        print(f"{joint}: held-out torque residual {before:.3g} -> {after:.3g} N m RMS; "
+              f"open-loop error over {window:g} s windows {sim_before:.3g} -> {sim_after:.3g} "
+              "rad RMS")  # fmt: skip
     if result["open_loop"]["diverged_before"] or result["open_loop"]["diverged_after"]:
         o = result["open_loop"]
         print(f"note: open-loop windows that left the motion (counted at pi rad): "

@@ -52,7 +52,6 @@ MARGIN_S = 0.1  # the filter's start and end left out of the comparison
 STRIDE = 8  # every 16 ms compared
 STUCK_RAD_S = 0.05  # a joint slower than this is held by its friction, or turning back
 HELD_OUT_EVERY = 3  # every third run is held out (the second of two)
-SPAN_STRIBECK_RAD_S = (0.1, 0.3, 1.0)  # the Stribeck speeds in span_rms_nm's span
 
 
 @cache
@@ -166,7 +165,6 @@ class RobotProblem:
             tuple(model.joint_names), largest, fastest, _axes(pm), _moved_kg(pm)
         ) + self._lattices(runs)
         self.min_improvement = 0.5  # as the torque-driven 1-DoF problem's
-        self._spans: dict[bool, FloatArray] = {}
         self.nominal = {
             f"{kind}[{name}]": float(value)
             for name, b, c in zip(
@@ -365,51 +363,6 @@ class RobotProblem:
     def noise_floor(self) -> float:
         return 1.0
 
-    def span_rms_nm(self, effects: Sequence[Any], params: Sequence[FloatArray]) -> FloatArray:
-        """Per joint, the held-out torque residual's RMS [N m] of the model with ``effects``
-        once the candidates' linear span is added to it, fitted on the fitting runs: every
-        link's inertial parameters (the regressor's columns) and per joint an offset, Coulomb
-        and viscous friction, a Stribeck fall-off at three speeds, and the first-order shapes
-        of a delay (the command's rate and the model's). No combination of the candidates
-        gets much below it (only the saturation's and cogging's shapes are not in the span):
-        what is above it the candidates could still describe, what is below it is physics
-        the library lacks."""
-        x_fit, x_held = self._span(held=False), self._span(held=True)
-        used = np.any(x_fit != 0.0, axis=0)
-        scale = np.max(np.abs(x_fit[:, used]), axis=0)
-        fit = self.error(effects, params, False)
-        coef = np.linalg.lstsq(x_fit[:, used] / scale, fit, rcond=None)[0]
-        left = self.error(effects, params, True) - (x_held[:, used] / scale) @ coef
-        per_joint = left.reshape(-1, self.model.dof)
-        return np.asarray(np.sqrt(np.mean(per_joint**2, axis=0)) * self.floor_nm, dtype=float)
-
-    def _span(self, held: bool) -> FloatArray:
-        """(error elements, columns) of span_rms_nm's span on the held-out or fitting runs, in
-        noise floors, ordered as ``error`` orders them (made once)."""
-        if held not in self._spans:
-            parts = []
-            n = self.model.dof
-            for run in self.held_runs if held else self.fit_runs:
-                samples = run.t.size
-                dt = float(run.t[1] - run.t[0])
-                per_joint = []
-                for j in range(n):
-                    own = [
-                        np.ones(samples),
-                        run.sliding[:, j],
-                        run.v[:, j],
-                        np.gradient(run.applied[:, j], dt),
-                        np.gradient(run.nominal[:, j], dt),
-                        *(self._stribeck(run, j, s) for s in SPAN_STRIBECK_RAD_S),
-                    ]
-                    block = np.zeros((samples, n, len(own)))
-                    block[:, j, :] = np.stack(own, axis=1)
-                    per_joint.append(block)
-                x = np.concatenate([run.regressor, *per_joint], axis=2)
-                parts.append((x / self.floor_nm[None, :, None]).reshape(samples * n, -1))
-            self._spans[held] = np.concatenate(parts)
-        return self._spans[held]
-
     def sensor_scope(
         self, effects: Sequence[Any], after_search: bool = False
     ) -> tuple[npt.NDArray[np.bool_], float] | None:
@@ -527,8 +480,7 @@ def robot_result(problem: RobotProblem, report: Any) -> dict[str, Any]:
     the whole robot), parameters, confidence_interval, where, heldout_rmse_before / after (in
     noise floors), evidence, alternatives}, and per joint the held-out torque residual's RMS
     [N m] and the open-loop error of short simulated windows [rad] (:mod:`robot_shooting`),
-    before any effect and after all found, and what the candidates' linear span leaves of the
-    residual after them (``span_rms_nm``: how far any combination of them could go)."""
+    before any effect and after all found."""
     by_name = {e.name: e for e, _p in report.fitted}
     findings = []
     for f in report.findings:
@@ -555,7 +507,6 @@ def robot_result(problem: RobotProblem, report: Any) -> dict[str, Any]:
         )
         for j, name in enumerate(problem.model.joint_names)
     }
-    span = problem.span_rms_nm(effects, params)
     held = problem.held_recordings
     before_rad, windows, diverged_before = window_errors(problem.model, [], held)
     after_rad, _, diverged_after = window_errors(problem.model, report.fitted, held)
@@ -571,10 +522,6 @@ def robot_result(problem: RobotProblem, report: Any) -> dict[str, Any]:
         "heldout_rmse_unit": "noise floors",
         "heldout_rms_nm": rms,
         "heldout_open_loop_rad": open_loop,
-        # what every candidate's linear shape at once leaves (RobotProblem.span_rms_nm)
-        "heldout_span_rms_nm": {
-            n: float(v) for n, v in zip(problem.model.joint_names, span, strict=True)
-        },
         "open_loop": {
             "window_s": WINDOW_S, "windows": windows,
             "diverged_before": diverged_before, "diverged_after": diverged_after,
