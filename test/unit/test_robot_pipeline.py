@@ -67,3 +67,23 @@ def test_bad_commands_and_samples_are_rejected_and_counted() -> None:
         "no_effort": 1, "not_finite": 2, "missing_joint": 1, "length_mismatch": 1,
         "stamp_not_increasing": 1,
     }  # fmt: skip
+
+
+def test_each_sample_is_judged_against_the_calibrated_threshold_of_its_speed() -> None:
+    cal = urdf_calibration(0.0, [0.0, 0.0])
+    n = len(SPEED_BANDS)
+    cal.thresholds_nm = [[0.1 * (b + 1) for b in range(n)], [1.0 * (b + 1) for b in range(n)]]
+    p = pipeline(cal)
+    p.command(["j0", "j1"], [], [], 0, efforts=[2.0, 1.0])  # a torque the states do not show
+    speeds = [0.0, *(edge * 1.01 for edge in SPEED_BANDS[1:]), SPEED_BANDS[-1] * 10.0]
+    p.sample(500_000, ["j0", "j1"], [0.0, 0.0], [0.0, 0.0])  # (the observer's first state)
+    seen = set()
+    for k, speed in enumerate(speeds):
+        v = [speed * 0.6, speed * 0.8]  # the joints' speed norm is ``speed``
+        estimates, _ = p.sample(1_000_000 * (k + 1), ["j0", "j1"], [0.0, 0.0], v)
+        expected = cal.threshold(np.array([v]))[0]
+        seen.add(float(expected[0]))
+        for est, threshold in zip(estimates, expected, strict=True):
+            assert est.torque_nm != 0.0
+            assert est.error_rad == pytest.approx(abs(est.torque_nm) / threshold)  # the share
+    assert len(seen) == n  # every band's threshold was used

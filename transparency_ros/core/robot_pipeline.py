@@ -60,6 +60,18 @@ class ObserverPipeline:
             self.calibration.command_delay_s * 1e9
         )  # fmt: skip
         self._commands: dict[str, tuple[list[int], list[float]]] = {}
+        # the calibration's thresholds as one table (band, joint), converted once: the
+        # sample path looks up a row by the speed
+        self._thresholds = (
+            None
+            if self.calibration is None
+            else np.asarray(self.calibration.thresholds_nm, dtype=float).T
+        )
+        self._bands = (
+            None
+            if self.calibration is None
+            else np.asarray(self.calibration.speed_bands_rad_s, dtype=float)
+        )
 
     def reject(self, reason: str, detail: str) -> SampleRejectedError:
         self.rejected[reason] = self.rejected.get(reason, 0) + 1
@@ -139,8 +151,9 @@ class ObserverPipeline:
             r = self.observer.step(stamp_ns, q, v, applied)
         except EstimatorError as err:
             raise self.reject("stamp_not_increasing", str(err)) from err
-        if self.calibration is not None:
-            threshold = self.calibration.threshold(v[None, :])[0]
+        if self._thresholds is not None and self._bands is not None:
+            band = int(np.searchsorted(self._bands, float(np.linalg.norm(v)), side="right")) - 1
+            threshold = self._thresholds[min(max(band, 0), self._bands.size - 1)]
         else:
             threshold = np.full(self.model.dof, self.threshold_nm)
         self.samples += 1
