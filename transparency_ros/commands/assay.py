@@ -8,7 +8,7 @@ import math
 import sys
 from typing import Any
 
-from transparency_ros.commands.detect import _common, _model, _recordings
+from transparency_ros.commands.detect import add_recording_arguments, read_recordings, robot_model
 from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 
@@ -29,7 +29,7 @@ def register(subparsers: Any) -> None:
             "other folds; with --calibration every run is assayed with that one."
         ),
     )
-    _common(a)
+    add_recording_arguments(a)
     a.add_argument("--calibration", help="a calibration YAML made on other runs (see calibrate)")
     a.add_argument(
         "--nominal",
@@ -82,8 +82,8 @@ def run(args: argparse.Namespace) -> int:
     def say(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
-    model = _model(args)  # (with --nominal's terms)
-    runs = _recordings(args, model, args.recordings)
+    model = robot_model(args)  # (with --nominal's terms)
+    runs = read_recordings(args, model, args.recordings)
     given = Calibration.load(args.calibration) if args.calibration else None
     if given is not None:
         given.model(model)  # a calibration of another robot: one clear line

@@ -17,7 +17,7 @@ from transparency_ros.core.errors import ConfigError
 METHODS = ("momentum_observer", "textbook", "position_error")
 
 
-def _common(p: argparse.ArgumentParser) -> None:
+def add_recording_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "recordings",
         nargs="+",
@@ -49,7 +49,7 @@ def register(subparsers: Any) -> None:
             "--calibration`."
         ),
     )
-    _common(c)
+    add_recording_arguments(c)
     c.add_argument("--out", required=True, help="the calibration YAML to write")
     c.set_defaults(func=run_calibrate)
 
@@ -63,7 +63,7 @@ def register(subparsers: Any) -> None:
             "score it per joint: pulses found, false alarms per minute, delay."
         ),
     )
-    _common(d)
+    add_recording_arguments(d)
     d.add_argument("--method", choices=METHODS, default="momentum_observer")
     d.add_argument("--calibration", help="calibration YAML (momentum_observer)")
     d.add_argument(
@@ -96,7 +96,7 @@ def register(subparsers: Any) -> None:
     d.set_defaults(func=run_detect)
 
 
-def _model(args: argparse.Namespace) -> Any:
+def robot_model(args: argparse.Namespace) -> Any:
     """The robot's model from ``--urdf``, with ``--nominal``'s terms where the command has it
     (discrepancy, assay); its notes on stderr."""
     from transparency_ros.core.robot_model import RobotModel  # noqa: PLC0415
@@ -111,7 +111,7 @@ def _model(args: argparse.Namespace) -> Any:
     return model
 
 
-def _recordings(
+def read_recordings(
     args: argparse.Namespace, model: Any, paths: list[str], labels: str | None = None
 ) -> list[Any]:
     """The recordings in ``paths`` (CSV or bags, globs expanded), in the model's joint order."""
@@ -149,8 +149,8 @@ def _recordings(
 def run_calibrate(args: argparse.Namespace) -> int:
     from transparency_ros.analysis.robot_calibration import calibrate  # noqa: PLC0415
 
-    model = _model(args)
-    recordings = _recordings(args, model, args.recordings)
+    model = robot_model(args)
+    recordings = read_recordings(args, model, args.recordings)
     cal = calibrate(model, recordings, args.gain, progress=lambda m: print(m, file=sys.stderr))
     cal.save(args.out)
     print(
@@ -174,8 +174,8 @@ def run_detect(args: argparse.Namespace) -> int:
     from transparency_ros.analysis import robot_detect as rd  # noqa: PLC0415
     from transparency_ros.core.robot_calibration import Calibration  # noqa: PLC0415
 
-    model = _model(args)
-    recordings = _recordings(args, model, args.recordings, args.labels)
+    model = robot_model(args)
+    recordings = read_recordings(args, model, args.recordings, args.labels)
     if args.method == "momentum_observer":
         if not args.calibration:
             raise ConfigError("--method momentum_observer needs --calibration (see calibrate)")
@@ -184,7 +184,7 @@ def run_detect(args: argparse.Namespace) -> int:
     else:
         if not args.clean:
             raise ConfigError(f"--method {args.method} needs --clean recordings for thresholds")
-        clean = _recordings(args, model, args.clean)
+        clean = read_recordings(args, model, args.clean)
 
         def signal(r: Any) -> Any:
             if args.method == "textbook":

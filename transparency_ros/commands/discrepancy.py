@@ -263,10 +263,10 @@ def _run_robot(args: argparse.Namespace) -> int:
     """The discrepancy tool on a robot's runs (``--urdf``)."""
     from transparency_ros.analysis.discrepancy.discover import Discoverer  # noqa: PLC0415
     from transparency_ros.analysis.discrepancy.robot import RobotProblem, robot_result  # noqa: PLC0415
-    from transparency_ros.commands.detect import _model, _recordings  # noqa: PLC0415
+    from transparency_ros.commands.detect import read_recordings, robot_model  # noqa: PLC0415
 
-    model = _model(args)  # (with --nominal's terms)
-    problem = RobotProblem(model, _recordings(args, model, args.bags))
+    model = robot_model(args)  # (with --nominal's terms)
+    problem = RobotProblem(model, read_recordings(args, model, args.bags))
     report = Discoverer(
         problem, progress=lambda text: print(text, file=sys.stderr, flush=True)
     ).run()
