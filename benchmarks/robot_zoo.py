@@ -235,9 +235,9 @@ def simulate(
         tau = gain * current
         for j in np.flatnonzero(np.isfinite(limit)):
             tau[:, j] = limit[j] * np.tanh(tau[:, j] / limit[j])
-        return (tau - offset - coulomb * np.tanh(v / 0.02)
-                + cog_a * np.sin(cog_n * q + cog_phi)
-                - load * np.abs(tau) * np.tanh(v / 0.02) - cable * (q - rest))  # fmt: skip
+        sliding = np.tanh(v / 0.02)  # (the Coulomb law's and the load friction's)
+        return (tau - offset - coulomb * sliding + cog_a * np.sin(cog_n * q + cog_phi)
+                - load * np.abs(tau) * sliding - cable * (q - rest))  # fmt: skip
 
     def derivative(state: np.ndarray, command: np.ndarray) -> np.ndarray:
         qs, vs, cs = state[:, 0:2], state[:, 2:4], state[:, 4:6]
