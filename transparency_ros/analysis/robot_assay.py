@@ -175,12 +175,14 @@ def operating_scale(cases: Sequence[tuple[Assayed, JointRecording]], goal: float
 
 
 def _recall(cases: Sequence[tuple[Assayed, JointRecording]], scale: FloatArray,
-            amplitude: FloatArray, settings: AssaySettings) -> list[rd.Score]:  # fmt: skip
+            amplitude: FloatArray, units: Sequence[Sequence[FloatArray]]
+            ) -> list[rd.Score]:  # fmt: skip
+    """Per joint, the detectors' score with the unit pulses ``units`` (per case, per
+    placement: pulse_labels, made once for every amplitude) at ``amplitude``."""
     marked = []  # the runs with the pulses' places as labels of 1 (whatever the amplitude,
     pushed = []  # which may be below the score's pulse level) and the detector on each
-    for det, rec in cases:
-        for placement in range(settings.placements):
-            unit = pulse_labels(rec, settings, placement)
+    for (det, rec), placed in zip(cases, units, strict=True):
+        for unit in placed:
             run = with_pulses(rec, unit * amplitude)
             marked.append(replace(run, label=np.abs(unit)))
             pushed.append((det, run))
@@ -214,14 +216,16 @@ def assay(
     hi = np.minimum(4.0 * scale * profile_top, limit_nm)
     lo = hi * 1e-2
     tried: list[list[tuple[float, float]]] = [[] for _ in joints]
-    top_scores = _recall(cases, scale, hi, settings)
+    units = [[pulse_labels(rec, settings, p) for p in range(settings.placements)]
+             for _, rec in cases]  # fmt: skip
+    top_scores = _recall(cases, scale, hi, units)
     for j, s in enumerate(top_scores):
         tried[j].append((float(hi[j]), s.recall))
     reached = np.array([s.recall >= settings.recall for s in top_scores])
     best = list(top_scores)
     for step in range(AMPLITUDE_STEPS):
         mid = np.sqrt(lo * hi)
-        scores = _recall(cases, scale, mid, settings)
+        scores = _recall(cases, scale, mid, units)
         for j, s in enumerate(scores):
             tried[j].append((float(mid[j]), s.recall))
             if s.recall >= settings.recall:  # (also where the largest tried fell short)
