@@ -198,6 +198,24 @@ def test_a_payload_is_placed_across_its_joints_axis_and_weighs_at_most_twice_wha
         assert not cand.meaningful(np.array([2 * moved, 0.0, 0.1]))
 
 
+def test_an_effect_says_whether_it_is_the_rigid_bodys_as_its_inertial_change_does(
+    urdf: RobotModel,
+) -> None:
+    """The open-loop simulation carries a rigid-body effect in the model and adds every other
+    one as a torque (robot_shooting.felt_torque, per integration step): the flag it reads
+    must agree with the effect's inertial change, at its start and at another value."""
+    problem = RobotProblem(urdf, runs(urdf, urdf.joint_names))
+    nominal = np.ones(10 * urdf.dof)
+    kinds = set()
+    for cand in problem.candidates():
+        for p in (cand.start, 0.5 * (np.array(cand.lower) + np.array(cand.upper))):
+            change = cand.inertial(np.asarray(p, dtype=float), nominal)
+            assert (change is not None) == cand.rigid_body, cand.name
+        kinds.add((cand.kind, cand.rigid_body))
+    assert ("payload", True) in kinds and ("parameter_drift", True) in kinds
+    assert ("coulomb_friction", False) in kinds
+
+
 def test_a_coarse_encoders_lattice_is_read_off_the_positions_and_named(urdf: RobotModel) -> None:
     """512 counts per turn: the positions move by a count or so between samples at 1 kHz, and
     the lattice is named on both joints with its step, read off the recordings (a 14-bit

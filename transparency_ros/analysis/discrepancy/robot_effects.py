@@ -62,6 +62,7 @@ class RobotEffect:
     stage = "torque"
     fittable = True
     discrete_choices = 0
+    rigid_body: ClassVar[bool] = False  # a change of the links' inertial parameters (inertial)
 
     def __init__(
         self,
@@ -310,6 +311,8 @@ class Payload(_JointEffect):
     parallel axis, and fitted free it wandered to its bound (the payload was then refused as
     pinned on a planar robot). ``axis`` None (a prismatic joint): all three coordinates."""
 
+    rigid_body = True
+
     def __init__(
         self, joint: int, name: str, moved_kg: float, axis: FloatArray | None = None
     ) -> None:
@@ -353,6 +356,8 @@ class ParameterDrift(_JointEffect):
     first moments together (``mass_scale``: its weight, as a payload spread like the link),
     or its rotational inertia about the joint's frame (``inertia_scale``: a URDF giving
     inertias about the wrong point). Both are named ``parameter_drift[joint]``, variants."""
+
+    rigid_body = True
 
     TERMS: ClassVar[dict[str, slice]] = {"mass_scale": slice(0, 4), "inertia_scale": slice(4, 10)}
 

@@ -80,7 +80,7 @@ def felt_torque(base: RobotModel, fitted: Fitted, q: FloatArray, v: FloatArray) 
     )
     out = np.zeros(q.shape)
     for effect, p in fitted:
-        if effect.inertial(p, np.zeros(10 * base.dof)) is None:
+        if not effect.rigid_body:  # (those are in the model, ``carrying``)
             extra = effect.torque(ctx, p)
             if extra is not None:
                 out += extra
