@@ -28,7 +28,7 @@ from transparency_ros.core.estimator import (
     SchmittDetector,
 )
 from transparency_ros.core.momentum_observer import RobotMomentumObserver
-from transparency_ros.core.robot_calibration import Calibration, effort_limit
+from transparency_ros.core.robot_calibration import Calibration, effort_limit, speed_band
 from transparency_ros.core.robot_model import RobotModel
 
 COMMAND_HISTORY = 256  # commands kept per joint (for the delay)
@@ -61,16 +61,11 @@ class ObserverPipeline:
         )  # fmt: skip
         self._commands: dict[str, tuple[list[int], list[float]]] = {}
         # the calibration's thresholds as one table (band, joint), converted once: the
-        # sample path looks up a row by the speed
+        # sample path looks up the row of its speed's band
         self._thresholds = (
             None
             if self.calibration is None
             else np.asarray(self.calibration.thresholds_nm, dtype=float).T
-        )
-        self._bands = (
-            None
-            if self.calibration is None
-            else np.asarray(self.calibration.speed_bands_rad_s, dtype=float)
         )
 
     def reject(self, reason: str, detail: str) -> SampleRejectedError:
@@ -151,9 +146,8 @@ class ObserverPipeline:
             r = self.observer.step(stamp_ns, q, v, applied)
         except EstimatorError as err:
             raise self.reject("stamp_not_increasing", str(err)) from err
-        if self._thresholds is not None and self._bands is not None:
-            band = int(np.searchsorted(self._bands, float(np.linalg.norm(v)), side="right")) - 1
-            threshold = self._thresholds[min(max(band, 0), self._bands.size - 1)]
+        if self.calibration is not None and self._thresholds is not None:
+            threshold = self._thresholds[speed_band(self.calibration.speed_bands_rad_s, v)[0]]
         else:
             threshold = np.full(self.model.dof, self.threshold_nm)
         self.samples += 1
