@@ -34,6 +34,7 @@ import json
 import math
 import os
 import sys
+import weakref
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -44,14 +45,22 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT))
+from robot_zoo import TWINS  # noqa: E402 - the zoo's twins: the balance's one delay
 
 BLOCK = 62  # compared points per block (16 ms apart: about 1 s)
 WORSE = 2.0  # no joint's t below -WORSE
-TWINS = {"command_delay": "sensor_delay", "sensor_delay": "command_delay"}
+_IDS: weakref.WeakKeyDictionary[Any, np.ndarray] = weakref.WeakKeyDictionary()
 
 
 def _block_ids(problem: Any) -> np.ndarray:
-    """Per held-out element (run, sample, joint as the error orders them), its block."""
+    """Per held-out element (run, sample, joint as the error orders them), its block (made
+    once per problem: every candidate of every round is judged on the same blocks)."""
+    if problem not in _IDS:
+        _IDS[problem] = _made_ids(problem)
+    return _IDS[problem]
+
+
+def _made_ids(problem: Any) -> np.ndarray:
     dof = problem.model.dof
     out = []
     for k, run in enumerate(problem.held_runs):
