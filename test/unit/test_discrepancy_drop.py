@@ -290,6 +290,50 @@ def test_the_cogging_scan_finds_a_waves_period_and_size(tmp_path: Path, between:
     )
 
 
+def test_a_waves_period_is_chosen_again_beside_the_effect_it_is_paired_with(
+    tmp_path: Path,
+) -> None:
+    """A cogging of 63 periods and a constant offset hidden together in the tool's own
+    simulation: scanned alone, the wave's period is chosen to lean the arm as the offset does
+    (not 63), and the pair fitted from there keeps that period. In the pair the wave is
+    scanned again beside the offset fitted alone: 63 within 2, the wave's size and the offset
+    within 10 %, the fitting trials' error lower; the candidate keeps its own period for the
+    other pairs."""
+    from transparency_ros.analysis.discrepancy.fitting import (  # noqa: PLC0415
+        fit_candidate,
+        refit,
+        rescanned,
+    )
+
+    problem = _self_simulated(
+        tmp_path,
+        cogging_nm=0.04,
+        cogging_periods=63.0,
+        cogging_phase_rad=1.0,
+        torque_offset_nm=0.05,
+    )
+    candidates = {c.name: c for c in problem.candidates()}
+    cogging, offset = candidates["cogging"], candidates["torque_offset"]
+    x_wave, _ = fit_candidate(problem, [], [], cogging)
+    alone_periods = cogging.periods
+    assert abs(alone_periods - 63) > 2  # (what the pair would keep without a second scan)
+    x_offset, _ = fit_candidate(problem, [], [], offset)
+    pair = [cogging, offset]
+    own, result = refit(problem, pair, [x_wave, x_offset])
+    added, again, _ = rescanned(
+        problem, [], [], pair=pair, own=own, result=result, alone=[x_wave, x_offset]
+    )
+    assert added[0] is not cogging and cogging.periods == alone_periods
+    assert abs(added[0].periods - 63) <= 2
+    assert again[0][0] == pytest.approx(0.04, rel=0.1)
+    assert again[1][0] == pytest.approx(0.05, rel=0.1)
+
+    def cost(effects: list[object], params: list[np.ndarray]) -> float:
+        return float(np.sum(problem.error(effects, params, False) ** 2))
+
+    assert cost(added, again) < cost(pair, own)
+
+
 @pytest.mark.parametrize("start", [1.0, -0.4])
 def test_backlash_is_measured_with_where_the_arm_starts_in_its_band(
     tmp_path: Path, start: float

@@ -54,6 +54,7 @@ from transparency_ros.analysis.discrepancy.fitting import (
     interval,
     parameter_count,
     refit,
+    rescanned,
     rmse,
 )
 from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel, Trial
@@ -559,8 +560,13 @@ class Discoverer:
         fitted.sort(key=lambda f: f[0])
         out = []
         # then, for the best few, everything together
-        for _, first, second, own, own_fit in fitted[: PAIR_FINALISTS if n else len(fitted)]:
-            added = [*first.added, *second.added]
+        for _, first, second, own_x, own_result in fitted[: PAIR_FINALISTS if n else len(fitted)]:
+            # (a member that chose from the data without the other chooses again beside it)
+            added, own, own_fit = rescanned(
+                self.problem, effects, params,
+                pair=[*first.added, *second.added], own=own_x, result=own_result,
+                alone=[first.new()[0][1], second.new()[0][1]],
+            )  # fmt: skip
             # nothing fitted before the pair (the declared weight has nothing to fit): its own
             # fit is the joint one. A refit of it could only return 'no better', and the pair
             # was then named without intervals (zoo 30 and 1074: point intervals on widths
