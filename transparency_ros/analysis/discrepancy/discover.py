@@ -37,8 +37,6 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import numpy as np
-
 from transparency_ros.analysis.discrepancy.effects import Effect
 from transparency_ros.analysis.discrepancy.findings import (
     LEFTOVER,
@@ -51,6 +49,7 @@ from transparency_ros.analysis.discrepancy.findings import (
 from transparency_ros.analysis.discrepancy.fitting import (
     aic,
     fit_candidate,
+    fit_cost,
     interval,
     parameter_count,
     refit,
@@ -551,11 +550,7 @@ class Discoverer:
                 x0 = [*params, *(x for _, x in first.new()), *(x for _, x in second.new())]
                 # the pair's own parameters first (the effects found before held)
                 own, result = refit(self.problem, [*effects, *added], x0, start=n)
-                cost = (
-                    2 * result.cost
-                    if result is not None
-                    else float(np.sum(self.problem.error([*effects, *added], own, False) ** 2))
-                )
+                cost = fit_cost(self.problem, [*effects, *added], own, result)
                 fitted.append((cost, first, second, own, result))
         fitted.sort(key=lambda f: f[0])
         out = []

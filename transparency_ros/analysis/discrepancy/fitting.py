@@ -123,7 +123,7 @@ def rescanned(
     choose as wrongly: on this project's own simulated cogging of 63 and 120 periods with an
     offset, 161 and 57 beside the pair's offset, 64 and 119 beside the offset fitted alone."""
     n = len(effects)
-    best = (list(pair), list(own), result, _cost(problem, [*effects, *pair], own, result))
+    best = (list(pair), list(own), result, fit_cost(problem, [*effects, *pair], own, result))
     for k, member in enumerate(pair):
         if getattr(member, "scan", None) is None:
             continue
@@ -135,15 +135,17 @@ def rescanned(
         start = list(own)
         start[n + k] = x
         again, again_fit = refit(problem, [*effects, *added], start, start=n)
-        cost = _cost(problem, [*effects, *added], again, again_fit)
+        cost = fit_cost(problem, [*effects, *added], again, again_fit)
         if cost < best[3]:
             best = (added, again, again_fit, cost)
     return best[0], best[1], best[2]
 
 
-def _cost(
+def fit_cost(
     problem: Problem, effects: Sequence[Any], params: Sequence[FloatArray], result: Any
 ) -> float:
+    """The sum of squared errors on the fitting trials: the least-squares result's (None:
+    simulated)."""
     if result is not None:
         return 2 * float(result.cost)
     return float(np.sum(problem.error(list(effects), list(params), False) ** 2))
