@@ -20,7 +20,8 @@ which value):
 * the shuttle's weight loads the arm while they touch; the controller sees the encoder's lattice;
 * the motor's cogging, a wave in its true position, adds to the drive's torque;
 * a torsional spring (and damper) between motor and arm makes them two bodies (a compliant
-  hub, shaft or arm): the encoder reads the motor's side.
+  hub, shaft or arm): the encoder reads the motor's side; with backlash the spring acts
+  through the dead band (in series).
 """
 
 from __future__ import annotations
@@ -276,8 +277,14 @@ def impact(dt: float, steps: int, p: Any, out_q: Any, out_y: Any) -> None:
 
 @jit
 def spring_torque(row: Any, q_arm: float, q_motor: float, w_arm: float, w_motor: float) -> float:
-    """What a torsional spring between motor and arm exerts on the motor (the arm: minus it)."""
-    return float(row[TORSION] * (q_arm - q_motor) + row[TORSION_DAMPING] * (w_arm - w_motor))
+    """What a torsional spring between motor and arm exerts on the motor (the arm: minus it);
+    with backlash, through its dead band (the two in series): nothing while the arm is within
+    the band, the spring and its damper once a flank is reached."""
+    twist, half = q_arm - q_motor, row[BACKLASH] / 2
+    if abs(twist) <= half:
+        return 0.0
+    twist -= math.copysign(half, twist)
+    return float(row[TORSION] * twist + row[TORSION_DAMPING] * (w_arm - w_motor))
 
 
 @jit
@@ -324,7 +331,7 @@ def forces(row: Any, s: Any, dt: float) -> tuple[float, float, float]:
 def joint_step(row: Any, s: Any, drive: float, load: float, dt: float) -> None:
     """Motor and arm over one step: one body while the motor pushes the arm; with backlash
     each on its own once it would pull, until the gap closes again (momentum kept); with a
-    torsional spring always each on its own, joined by the spring."""
+    torsional spring always each on its own, joined by the spring (through the dead band)."""
     fr = (row[VISCOUS], row[COULOMB], row[STATIC])
     j_r = row[ROTOR]
     riding = row[MASS] * (row[ARM] * arm_sin_cos(s)[1]) ** 2 if s[GLUED] else 0.0
