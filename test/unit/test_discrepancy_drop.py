@@ -269,6 +269,7 @@ def test_a_hub_spring_acts_through_the_backlash_band(tmp_path: Path) -> None:
     row = np.zeros(len(k.COLUMNS))
     row[k.TORSION], row[k.TORSION_DAMPING] = 1000.0, 2.0
     assert k.spring_torque(row, 0.003, 0.0, 1.0, 0.0) == pytest.approx(3.0 + 2.0)
+    assert k.spring_torque(row, 0.0, 0.0, 1.0, 0.0) == pytest.approx(2.0)  # struck, untwisted
     row[k.BACKLASH] = 0.004  # a band of +-0.002 rad
     assert k.spring_torque(row, 0.0015, 0.0, 1.0, 0.0) == 0.0
     assert k.spring_torque(row, -0.0015, 0.0, -1.0, 0.0) == 0.0

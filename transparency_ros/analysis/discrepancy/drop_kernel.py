@@ -281,9 +281,10 @@ def spring_torque(row: Any, q_arm: float, q_motor: float, w_arm: float, w_motor:
     with backlash, through its dead band (the two in series): nothing while the arm is within
     the band, the spring and its damper once a flank is reached."""
     twist, half = q_arm - q_motor, row[BACKLASH] / 2
-    if abs(twist) <= half:
-        return 0.0
-    twist -= math.copysign(half, twist)
+    if half > 0.0:  # (without a band: the whole twist, the damper even at none)
+        if abs(twist) <= half:
+            return 0.0
+        twist -= math.copysign(half, twist)
     return float(row[TORSION] * twist + row[TORSION_DAMPING] * (w_arm - w_motor))
 
 
