@@ -27,7 +27,7 @@ def effort_limit(model: RobotModel) -> FloatArray:
     return np.where(limit > 0, limit, np.inf)
 
 
-def speed_band(bands: Sequence[float], velocity: FloatArray) -> npt.NDArray[np.intp]:
+def speed_band(bands: Sequence[float] | FloatArray, velocity: FloatArray) -> npt.NDArray[np.intp]:
     """Per sample, the band of ``bands`` (their lower edges [rad/s]) its speed (the norm of
     the joints' velocities) falls in."""
     speed = np.linalg.norm(np.atleast_2d(velocity), axis=1)

@@ -67,6 +67,12 @@ class ObserverPipeline:
             if self.calibration is None
             else np.asarray(self.calibration.thresholds_nm, dtype=float).T
         )
+        # (the bands' edges too: a list searched as an array is converted on every sample)
+        self._bands = (
+            None
+            if self.calibration is None
+            else np.asarray(self.calibration.speed_bands_rad_s, dtype=float)
+        )
 
     def reject(self, reason: str, detail: str) -> SampleRejectedError:
         self.rejected[reason] = self.rejected.get(reason, 0) + 1
@@ -146,8 +152,8 @@ class ObserverPipeline:
             r = self.observer.step(stamp_ns, q, v, applied)
         except EstimatorError as err:
             raise self.reject("stamp_not_increasing", str(err)) from err
-        if self.calibration is not None and self._thresholds is not None:
-            threshold = self._thresholds[speed_band(self.calibration.speed_bands_rad_s, v)[0]]
+        if self._bands is not None and self._thresholds is not None:
+            threshold = self._thresholds[speed_band(self._bands, v)[0]]
         else:
             threshold = np.full(self.model.dof, self.threshold_nm)
         self.samples += 1
