@@ -329,6 +329,7 @@ def test_a_waves_period_is_chosen_again_beside_the_effect_it_is_paired_with(
     other pairs."""
     from transparency_ros.analysis.discrepancy.fitting import (  # noqa: PLC0415
         fit_candidate,
+        fit_cost,
         refit,
         rescanned,
     )
@@ -349,8 +350,9 @@ def test_a_waves_period_is_chosen_again_beside_the_effect_it_is_paired_with(
     pair = [cogging, offset]
     own, result = refit(problem, pair, [x_wave, x_offset])
     added, again, _ = rescanned(
-        problem, [], [], pair=pair, own=own, result=result, alone=[x_wave, x_offset]
-    )
+        problem, [], [], pair=pair, own=own, result=result,
+        cost=fit_cost(problem, pair, own, result), alone=[x_wave, x_offset],
+    )  # fmt: skip
     assert added[0] is not cogging and cogging.periods == alone_periods
     assert abs(added[0].periods - 63) <= 2
     assert again[0][0] == pytest.approx(0.04, rel=0.1)

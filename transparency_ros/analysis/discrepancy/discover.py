@@ -555,11 +555,11 @@ class Discoverer:
         fitted.sort(key=lambda f: f[0])
         out = []
         # then, for the best few, everything together
-        for _, first, second, own_x, own_result in fitted[: PAIR_FINALISTS if n else len(fitted)]:
+        for cost, first, second, own_x, own_fit in fitted[: PAIR_FINALISTS if n else len(fitted)]:
             # (a member that chose from the data without the other chooses again beside it)
-            added, own, own_fit = rescanned(
+            added, own, own_fit = rescanned(  # noqa: PLW2901 - the pair as it is kept
                 self.problem, effects, params,
-                pair=[*first.added, *second.added], own=own_x, result=own_result,
+                pair=[*first.added, *second.added], own=own_x, result=own_fit, cost=cost,
                 alone=[first.new()[0][1], second.new()[0][1]],
             )  # fmt: skip
             # nothing fitted before the pair (the declared weight has nothing to fit): its own

@@ -110,20 +110,23 @@ def rescanned(
     pair: Sequence[Any],
     own: Sequence[FloatArray],
     result: Any,
+    cost: float,
     alone: Sequence[FloatArray],
 ) -> tuple[list[Any], list[FloatArray], Any]:
-    """A pair (``pair``, fitted together to ``own``, ``result``, with ``effects`` held at
-    ``params``) whose member chooses from the data (cogging's period, ``scan``) chose without
-    the other: that member scanned and fitted again beside the other at its fit alone
-    (``alone``: each member's), as a copy (the candidate keeps its own choice for the other
-    pairs), and the pair refitted from there; kept where it fits the fitting trials better.
+    """A pair (``pair``, fitted together to ``own``, ``result``, its ``cost`` on the fitting
+    trials, with ``effects`` held at ``params``) whose member chooses from the data (cogging's
+    period, ``scan``) chose without the other: that member scanned and fitted again beside
+    the other at its fit alone (``alone``: each member's), as a copy (the candidate keeps its
+    own choice for the other pairs), and the pair refitted from there; kept where it fits the
+    fitting trials better (the cost given, not simulated again: a pair without a wave costs
+    nothing here).
     Scanned alone, a wave's period stands in for the other member too (zoo 11317: a cogging
     of 63 periods and an offset; alone, a period whose wave leans the arm as the offset does
     took the scan). Beside the other at the pair's fit, made with that period, the scan can
     choose as wrongly: on this project's own simulated cogging of 63 and 120 periods with an
     offset, 161 and 57 beside the pair's offset, 64 and 119 beside the offset fitted alone."""
     n = len(effects)
-    best = (list(pair), list(own), result, fit_cost(problem, [*effects, *pair], own, result))
+    best = (list(pair), list(own), result, cost)
     for k, member in enumerate(pair):
         if getattr(member, "scan", None) is None:
             continue
@@ -135,9 +138,9 @@ def rescanned(
         start = list(own)
         start[n + k] = x
         again, again_fit = refit(problem, [*effects, *added], start, start=n)
-        cost = fit_cost(problem, [*effects, *added], again, again_fit)
-        if cost < best[3]:
-            best = (added, again, again_fit, cost)
+        cost_again = fit_cost(problem, [*effects, *added], again, again_fit)
+        if cost_again < best[3]:
+            best = (added, again, again_fit, cost_again)
     return best[0], best[1], best[2]
 
 
