@@ -50,3 +50,12 @@ def test_joint_state_round_trip_through_fast_dds() -> None:
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def test_each_test_context_is_on_a_domain_of_its_own_named_for_its_processes(
+    ros_context: Context,
+) -> None:
+    domain = ros_context.get_domain_id()
+    assert DOMAIN_MIN <= domain <= DOMAIN_MAX
+    # processes the test starts with os.environ join the same domain
+    assert int(os.environ["ROS_DOMAIN_ID"]) == domain
