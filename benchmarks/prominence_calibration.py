@@ -40,6 +40,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 PROMINENCES = [2.0, 3.0, 5.0, 8.0, 10.0, 12.0, 15.0, 20.0, 30.0]
 PERIOD_TOLERANCE = 0.03  # a period this close to the truth is the hidden one
+CYCLE_BANDS = [(1.0, 1.25), (1.25, 1.5), (1.5, 2.0), (2.0, float("inf"))]
 
 
 def log_campaign(campaign: Path) -> dict[str, Any]:
@@ -145,7 +146,46 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
             for p, w in waived.items()
         ),
     ]
+    # how few periods of travel a wave may span: per band of periods, the most prominent
+    # eligible wave where cogging is absent, and the hidden ones the rule would name there
+    bands = []
+    for lo, hi in CYCLE_BANDS:
+
+        def within(r: dict[str, Any], lo: float = lo, hi: float = hi) -> list[float]:
+            return [s["prominence"] for s in r["steps"] if s["eligible"] and lo <= s["cycles"] < hi]
+
+        def true_within(r: dict[str, Any], lo: float = lo, hi: float = hi) -> list[float]:
+            return [
+                s["prominence"]
+                for s in r["steps"]
+                if s["eligible"] and lo <= s["cycles"] < hi and _true_period(s, r["truth"])
+            ]
+
+        largest = sorted((max(within(r)) for r in absent if within(r)), reverse=True)
+        bands.append({
+            "cycles": [lo, hi],
+            "absent_with_a_wave": len(largest),
+            "absent_largest": largest[:5],
+            "hidden_named": sum(max(true_within(r), default=0.0) >= PROMINENT_WAVE for r in hidden),
+        })  # fmt: skip
+    lines += [
+        "",
+        f"By periods of travel (the rule's WAVE_CYCLES = {WAVE_CYCLES:g}): campaigns where cogging"
+        " is absent with an eligible wave in the band, the largest prominences there, and hidden"
+        f" coggings whose true period reaches {PROMINENT_WAVE:g} there.",
+        "",
+        "| periods of travel | absent campaigns with a wave | largest prominence (absent) |"
+        f" hidden named at {PROMINENT_WAVE:g} |",
+        "|---|---|---|---|",
+        *(
+            f"| {b['cycles'][0]:g}-{b['cycles'][1]:g} | {b['absent_with_a_wave']}/{len(absent)} |"
+            f" {', '.join(f'{p:.1f}' for p in b['absent_largest']) or '-'} |"
+            f" {b['hidden_named']}/{len(hidden)} |"
+            for b in bands
+        ),
+    ]
     data = {
+        "bands": bands,
         "campaigns": len(rows),
         "absent": len(absent),
         "hidden": len(hidden),

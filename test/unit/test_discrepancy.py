@@ -397,7 +397,7 @@ def test_a_wave_whose_period_stands_out_of_the_scan_is_judged_by_its_prominence(
         return s
 
     assert loop._share(step(0.45, d.PROMINENT_WAVE, d.WAVE_CYCLES)) == 0.0
-    assert loop._share(step(0.45, d.PROMINENT_WAVE, d.WAVE_CYCLES - 0.5)) == 0.75
+    assert loop._share(step(0.45, d.PROMINENT_WAVE, 1.1)) == 0.75
     assert loop._share(step(0.45, d.PROMINENT_WAVE - 1, 10.0)) == 0.75
     assert loop._share(step(0.45, d.PROMINENT_WAVE * 3, 10.0, added=2)) == 0.75
     assert loop._share(step(0.45, None, 0.0)) == 0.75
