@@ -6,6 +6,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from transparency_ros.analysis.discrepancy.discover import Discoverer
 from transparency_ros.analysis.discrepancy.findings import Report
@@ -129,3 +130,37 @@ def test_fit_candidate_scans_only_without_a_start() -> None:
     assert scans == [1] and np.allclose(x, [0.02, 0.0])
     x, _ = fit_candidate(SimpleNamespace(), [], [], Wave(), np.array([0.05, -1.0]))
     assert scans == [1] and np.allclose(x, [0.05, -1.0])
+
+
+def test_a_declared_effect_is_paired_with_every_single_not_only_the_best_alone(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The shuttle's weight (declared, nothing fitted) that no single names beside is tried
+    with every single candidate: the one that hid it may be the worst alone (zoo_11662: a
+    b_v drift made the error 1.7 times worse without the weight, and was named with it)."""
+    from transparency_ros.analysis.discrepancy import discover as d  # noqa: PLC0415
+
+    weight = _effect("payload_gravity", declared=True)
+    names = ["quantization", "stiction", "impact_speed_loss", "torque_offset", "parameter_drift"]
+    cands = [_effect(n) for n in names]
+    loop = Discoverer.__new__(Discoverer)
+    loop.problem = SimpleNamespace(
+        candidates=lambda: [weight, *cands], initial=lambda _c: np.zeros(0)
+    )
+    singles = [
+        SimpleNamespace(
+            added=[c],
+            params=[np.zeros(1)],
+            rmse=1e-3 * (1 + k),
+            aic=float(k),
+            result=None,
+            joint=False,
+        )
+        for k, c in enumerate(cands)
+    ]  # (the drift last: the worst alone)
+    monkeypatch.setattr(d, "refit", lambda _p, _e, params: (list(params), None))
+    loop._step = lambda _e, _p, added, _r, _b: SimpleNamespace(added=added)  # type: ignore[method-assign,assignment]
+    steps = loop._with_declared([], singles, None)  # type: ignore[arg-type]
+    assert [[a.name for a in s.added] for s in steps] == [[n, "payload_gravity"] for n in names]
+    assert all(s.alone_rmse == [single.rmse] for s, single in zip(steps, singles, strict=True))
+    assert loop._with_declared([weight], singles, None) == []  # (nothing pending)
