@@ -96,7 +96,11 @@ def test_duplicated_replies_and_storms_are_not_published_twice(storm_rig: Rig, c
     rig.run()
     c = rig.client.counters
     duplicates, samples = c.duplicates, c.samples
-    published, cycles = len(rig.published), rig.loop.cycles
+    # cycles read before the samples published (and after them below): the loop thread runs
+    # between the two reads, on a busy machine several cycles (a failure at 188 - 23 > 188 - 25 + 1
+    # with the reads the other way round)
+    cycles = rig.loop.cycles
+    published = len(rig.published)
     rig.sim.faults.reply_copies = copies
     time.sleep(0.3)
     rig.sim.faults.reply_copies = 1
