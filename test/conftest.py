@@ -3,7 +3,8 @@
 Every ROS process a test starts (in-process rclpy contexts and subprocesses alike) inherits this
 environment: discovery confined to loopback and a domain ID chosen for this session only, never
 the caller's (a developer's shell may point at a live robot). It is set at import time, before
-any test module can import rclpy. Set TRANSPARENCY_TEST_DOMAIN_ID to force a domain.
+any test module can import rclpy. A test with ``ros_context`` (test/ros/conftest.py) moves to a
+domain of its own for its duration. Set TRANSPARENCY_TEST_DOMAIN_ID to force one domain for all.
 
 Signals: the suite passes however it is started. A shell without job control (a script's
 background job, ``nohup ... &``) starts pytest with SIGINT ignored, and an ignored signal stays

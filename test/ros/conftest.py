@@ -4,12 +4,14 @@ Each test's Context is on a domain of its own (and ``ROS_DOMAIN_ID`` says so whi
 for the processes it starts): no participant of an earlier test, nor of a process an earlier test
 killed, is ever discovered by a later one. Fast DDS 2.14 can deadlock deleting a participant while
 its event thread checks a remote participant's lease (eProsima/Fast-DDS 6502; docs/known_issues.md);
-a test that discovers only its own participants has no stale lease to check.
+a test that discovers only its own participants has no stale lease to check. A domain forced
+with TRANSPARENCY_TEST_DOMAIN_ID (test/conftest.py) is kept for every test.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -27,7 +29,8 @@ from transparency_ros.rosenv import pick_domain_id  # noqa: E402
 
 @pytest.fixture
 def ros_context(monkeypatch: pytest.MonkeyPatch) -> Iterator[Context]:
-    domain = pick_domain_id()
+    forced = os.environ.get("TRANSPARENCY_TEST_DOMAIN_ID")  # (test/conftest.py: one domain)
+    domain = int(forced) if forced else pick_domain_id()
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     context = Context()
     rclpy.init(context=context, domain_id=domain)

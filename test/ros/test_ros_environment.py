@@ -1,5 +1,5 @@
 """The ROS side of the environment: real rclpy + Fast DDS from the ros-jazzy wheels, confined to
-loopback on this session's own domain (see test/conftest.py)."""
+loopback on this session's own domain (see test/conftest.py), each ``ros_context`` on its own."""
 
 from __future__ import annotations
 
