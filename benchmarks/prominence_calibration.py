@@ -95,32 +95,34 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
     absent = [r for r in rows if _kind(r["truth"]) == "absent"]
     hidden = [r for r in rows if _kind(r["truth"]) == "hidden"]
 
-    def eligible(r: dict[str, Any], *, waves: bool) -> list[dict[str, Any]]:
+    waves = (WAVE_CYCLES, float("inf"))  # the rule's periods of travel
+
+    def prominences(
+        r: dict[str, Any], band: tuple[float, float], *, true: bool = False
+    ) -> list[float]:
+        """The prominences of the eligible steps over ``band`` periods of travel (of the true
+        period only: ``true``)."""
         return [
-            s for s in r["steps"] if s["eligible"] and (not waves or s["cycles"] >= WAVE_CYCLES)
+            s["prominence"]
+            for s in r["steps"]
+            if s["eligible"]
+            and band[0] <= s["cycles"] < band[1]
+            and (not true or _true_period(s, r["truth"]))
         ]
 
-    def most(r: dict[str, Any], *, waves: bool, true: bool = False) -> float:
-        """The largest prominence of an eligible step (of the true period: ``true``)."""
-        return max(
-            (
-                s["prominence"]
-                for s in eligible(r, waves=waves)
-                if not true or _true_period(s, r["truth"])
-            ),
-            default=0.0,
-        )
+    def most(r: dict[str, Any], band: tuple[float, float], *, true: bool = False) -> float:
+        return max(prominences(r, band, true=true), default=0.0)
 
     # waived share: over WAVE_CYCLES periods of travel, at or above a prominence
     waived = {
         str(p): {
-            "absent_named": sum(most(r, waves=True) >= p for r in absent),
-            "hidden_named": sum(most(r, waves=True, true=True) >= p for r in hidden),
+            "absent_named": sum(most(r, waves) >= p for r in absent),
+            "hidden_named": sum(most(r, waves, true=True) >= p for r in hidden),
         }
         for p in PROMINENCES
     }
-    absent_waves = sorted((most(r, waves=True) for r in absent), reverse=True)
-    hidden_true = sorted((most(r, waves=True, true=True) for r in hidden), reverse=True)
+    absent_waves = sorted((most(r, waves) for r in absent), reverse=True)
+    hidden_true = sorted((most(r, waves, true=True) for r in hidden), reverse=True)
     lines = [
         "# Cogging's period prominence (drop tests), calibrated on the zoo's campaigns",
         "",
@@ -149,24 +151,14 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
     # how few periods of travel a wave may span: per band of periods, the most prominent
     # eligible wave where cogging is absent, and the hidden ones the rule would name there
     bands = []
-    for lo, hi in CYCLE_BANDS:
-
-        def within(r: dict[str, Any], lo: float = lo, hi: float = hi) -> list[float]:
-            return [s["prominence"] for s in r["steps"] if s["eligible"] and lo <= s["cycles"] < hi]
-
-        def true_within(r: dict[str, Any], lo: float = lo, hi: float = hi) -> list[float]:
-            return [
-                s["prominence"]
-                for s in r["steps"]
-                if s["eligible"] and lo <= s["cycles"] < hi and _true_period(s, r["truth"])
-            ]
-
-        largest = sorted((max(within(r)) for r in absent if within(r)), reverse=True)
+    for band in CYCLE_BANDS:
+        found = [p for p in (prominences(r, band) for r in absent) if p]
+        largest = sorted((max(p) for p in found), reverse=True)
         bands.append({
-            "cycles": [lo, hi],
+            "cycles": [band[0], band[1] if band[1] < float("inf") else None],  # (strict JSON)
             "absent_with_a_wave": len(largest),
             "absent_largest": largest[:5],
-            "hidden_named": sum(max(true_within(r), default=0.0) >= PROMINENT_WAVE for r in hidden),
+            "hidden_named": sum(most(r, band, true=True) >= PROMINENT_WAVE for r in hidden),
         })  # fmt: skip
     lines += [
         "",
@@ -178,10 +170,10 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
         f" hidden named at {PROMINENT_WAVE:g} |",
         "|---|---|---|---|",
         *(
-            f"| {b['cycles'][0]:g}-{b['cycles'][1]:g} | {b['absent_with_a_wave']}/{len(absent)} |"
+            f"| {band[0]:g}-{band[1]:g} | {b['absent_with_a_wave']}/{len(absent)} |"
             f" {', '.join(f'{p:.1f}' for p in b['absent_largest']) or '-'} |"
             f" {b['hidden_named']}/{len(hidden)} |"
-            for b in bands
+            for band, b in zip(CYCLE_BANDS, bands, strict=True)
         ),
     ]
     data = {
