@@ -30,6 +30,7 @@ where the true period (within 3 %) would be named.
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 PROMINENCES = [2.0, 3.0, 5.0, 8.0, 10.0, 12.0, 15.0, 20.0, 30.0]
 PERIOD_TOLERANCE = 0.03  # a period this close to the truth is the hidden one
 CYCLE_BANDS = [(1.0, 1.25), (1.25, 1.5), (1.5, 2.0), (2.0, float("inf"))]
+SPREADS = [0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0]
+SPREAD_BANDS = [(1.5, 2.0), (2.0, 2.5), (2.5, float("inf"))]
 
 
 def log_campaign(campaign: Path) -> dict[str, Any]:
@@ -60,6 +63,8 @@ def log_campaign(campaign: Path) -> dict[str, Any]:
             "amplitude_nm": float(s.params[-1][0]),
             "prominence": s.scanned[0][0],
             "cycles": s.scanned[0][1],
+            # (NaN, not measured: null, strict JSON)
+            "spread": None if math.isnan(s.scanned[0][2]) else s.scanned[0][2],
             "gain": float(s.gain),
             # every condition of the rule but the share
             "eligible": bool(
@@ -176,7 +181,10 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
             for band, b in zip(CYCLE_BANDS, bands, strict=True)
         ),
     ]
+    spread_lines, spread_data = _spread_table(absent, hidden)
+    lines += spread_lines
     data = {
+        "spread": spread_data,
         "bands": bands,
         "campaigns": len(rows),
         "absent": len(absent),
@@ -191,6 +199,87 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
         "median_absent": float(np.median(absent_waves)) if absent_waves else None,
     }
     return lines, data
+
+
+def _spread_table(
+    absent: list[dict[str, Any]], hidden: list[dict[str, Any]]
+) -> tuple[list[str], dict[str, Any]]:
+    """The second way a wave's share is waived (steps.REPLICATED_SPREAD over
+    REPLICATED_CYCLES periods of travel): per threshold, absent campaigns with an eligible
+    wave that would be named and hidden ones whose true period would be; per band of periods
+    of travel, the absent campaigns' smallest spreads. Logs made before the spread was
+    measured (no ``spread``) count as unmeasured."""
+    from transparency_ros.analysis.discrepancy.steps import (  # noqa: PLC0415
+        REPLICATED_CYCLES,
+        REPLICATED_SPREAD,
+    )
+
+    measured = [r for r in absent + hidden if any("spread" in s for s in r["steps"])]
+    absent = [r for r in absent if r in measured]
+    hidden = [r for r in hidden if r in measured]
+
+    def least(r: dict[str, Any], band: tuple[float, float], *, true: bool = False) -> float:
+        """The smallest spread of the eligible steps over ``band`` periods of travel."""
+        return min(
+            (
+                s["spread"]
+                for s in r["steps"]
+                if s["eligible"]
+                and s.get("spread") is not None
+                and band[0] <= s["cycles"] < band[1]
+                and (not true or _true_period(s, r["truth"]))
+            ),
+            default=math.inf,
+        )
+
+    rule = (REPLICATED_CYCLES, math.inf)
+    named = {
+        str(t): {
+            "absent_named": sum(least(r, rule) <= t for r in absent),
+            "hidden_named": sum(least(r, rule, true=True) <= t for r in hidden),
+        }
+        for t in SPREADS
+    }
+    bands = [
+        {
+            "cycles": [lo, hi if hi < math.inf else None],
+            "absent_least": sorted(x for r in absent if (x := least(r, (lo, hi))) < math.inf)[:5],
+            "hidden_true": sorted(
+                x for r in hidden if (x := least(r, (lo, hi), true=True)) < math.inf
+            ),
+        }
+        for lo, hi in SPREAD_BANDS
+    ]
+    lines = [
+        "",
+        f"## Spread over the trials (REPLICATED_SPREAD = {REPLICATED_SPREAD:g},"
+        f" REPLICATED_CYCLES = {REPLICATED_CYCLES:g})",
+        "",
+        f"Campaigns whose logs measured it: {len(measured)} (absent {len(absent)}, hidden"
+        f" {len(hidden)}). A wave every trial shows alike (spread at most the threshold) over"
+        f" {REPLICATED_CYCLES:g} periods of travel or more is named without the share.",
+        "",
+        "| spread at most | absent campaigns that would name a wave | hidden campaigns whose"
+        " true period would be named |",
+        "|---|---|---|",
+        *(
+            f"| {t} | {w['absent_named']}/{len(absent)} | {w['hidden_named']}/{len(hidden)} |"
+            for t, w in named.items()
+        ),
+        "",
+        "Smallest spreads of eligible waves per band of periods of travel: where cogging is"
+        " absent (per campaign, the 5 smallest) and of hidden coggings' true periods.",
+        "",
+        "| periods of travel | absent (smallest) | hidden, true period |",
+        "|---|---|---|",
+        *(
+            f"| {b['cycles'][0]:g}-{b['cycles'][1] if b['cycles'][1] is not None else 'inf'} |"
+            f" {', '.join(f'{x:.2f}' for x in b['absent_least']) or '-'} |"
+            f" {', '.join(f'{x:.2f}' for x in b['hidden_true']) or '-'} |"
+            for b in bands
+        ),
+    ]
+    return lines, {"named": named, "bands": bands, "measured": len(measured)}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -4,6 +4,7 @@ labels to a file the tool never reads; the test reads them to score)."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -382,18 +383,26 @@ def test_a_wave_whose_period_stands_out_of_the_scan_is_judged_by_its_prominence(
     """A cogging step removing 0.45 of the error above the floor (under the uniform 0.75):
     named where its period's waves removed PROMINENT_WAVE times what the median period's did,
     over WAVE_CYCLES periods of the arm's travel; not with the same prominence over one period
-    (a smooth torque any low period imitates), nor with an ordinary one. A pair's wave keeps
-    the uniform share; a step without a scanned choice is judged as before."""
-    from transparency_ros.analysis.discrepancy import discover as d  # noqa: PLC0415
+    (a smooth torque any low period imitates), nor with an ordinary one. An ordinary one is
+    named where every trial shows the same wave (its spread at most REPLICATED_SPREAD) over
+    REPLICATED_CYCLES periods, not over fewer, nor with a wider or unmeasured spread. A pair's
+    wave keeps the uniform share; a step without a scanned choice is judged as before."""
+    from transparency_ros.analysis.discrepancy import steps as d  # noqa: PLC0415
 
     loop = Discoverer(SimpleNamespace(min_improvement=0.75))  # type: ignore[arg-type]
     wave = DropOffset(0.03)  # (any effect: what is judged is the step's scan)
 
-    def step(gain: float, prominence: float | None, cycles: float, added: int = 1) -> Step:
+    def step(
+        gain: float,
+        prominence: float | None,
+        cycles: float,
+        added: int = 1,
+        spread: float = math.nan,
+    ) -> Step:
         s = _step(wave, [0.05], 1e-3, 1e-4)
         s.added = [wave] * added
         s.gain = gain
-        s.scanned = [] if prominence is None else [(prominence, cycles)]
+        s.scanned = [] if prominence is None else [(prominence, cycles, spread)]
         return s
 
     assert loop._share(step(0.45, d.PROMINENT_WAVE, d.WAVE_CYCLES)) == 0.0
@@ -401,3 +410,9 @@ def test_a_wave_whose_period_stands_out_of_the_scan_is_judged_by_its_prominence(
     assert loop._share(step(0.45, d.PROMINENT_WAVE - 1, 10.0)) == 0.75
     assert loop._share(step(0.45, d.PROMINENT_WAVE * 3, 10.0, added=2)) == 0.75
     assert loop._share(step(0.45, None, 0.0)) == 0.75
+    alike = d.REPLICATED_SPREAD
+    assert loop._share(step(0.1, 2.0, d.REPLICATED_CYCLES, spread=alike)) == 0.0
+    assert loop._share(step(0.1, 2.0, d.REPLICATED_CYCLES - 0.1, spread=alike)) == 0.75
+    assert loop._share(step(0.1, 2.0, 10.0, spread=alike + 0.1)) == 0.75
+    assert loop._share(step(0.1, 2.0, 10.0)) == 0.75
+    assert loop._share(step(0.1, 2.0, 10.0, added=2, spread=0.0)) == 0.75

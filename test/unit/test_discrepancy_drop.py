@@ -7,6 +7,7 @@ import json
 import math
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -316,6 +317,38 @@ def test_the_cogging_scan_finds_a_waves_period_and_size(tmp_path: Path, between:
     assert cogging.wave_cycles == pytest.approx(
         cogging.periods * problem.position_span / (2 * math.pi)
     )
+
+
+def test_a_wave_every_trial_shows_alike_has_a_small_spread(tmp_path: Path) -> None:
+    """The tool's own simulation with a cogging of 100 periods per revolution: the wave the
+    scan fits, refitted on each trial alone, is the same in every one (spread under
+    REPLICATED_SPREAD, over REPLICATED_CYCLES periods of travel); the same wave at a period
+    not hidden (61) is not, nor is the wave the scan fits where a viscous drift is hidden
+    and no wave. The load cell's bins pool the trials: no spread (NaN) there."""
+    from transparency_ros.analysis.discrepancy.drop_force import ForceView  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.fitting import fit_candidate  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.steps import (  # noqa: PLC0415
+        REPLICATED_CYCLES,
+        REPLICATED_SPREAD,
+    )
+
+    def fitted(problem: DropProblem) -> tuple[Any, np.ndarray]:
+        cogging = next(c for c in problem.candidates() if c.name == "cogging")
+        x, _ = fit_candidate(problem, [], [], cogging)
+        return cogging, x
+
+    problem = _self_simulated(
+        tmp_path / "wave", cogging_nm=0.03, cogging_periods=100.0, cogging_phase_rad=0.8
+    )
+    cogging, x = fitted(problem)
+    assert cogging.periods == 100 and cogging.wave_cycles >= REPLICATED_CYCLES
+    assert cogging.spread(problem, [], [x]) < REPLICATED_SPREAD / 2
+    cogging.periods = 61
+    assert cogging.spread(problem, [], [x]) > 2 * REPLICATED_SPREAD
+    assert math.isnan(cogging.spread(ForceView(problem), [], [x]))  # type: ignore[arg-type]
+    drift = _self_simulated(tmp_path / "drift", viscous_nms_per_rad=1.6 * 0.153)
+    cogging, x = fitted(drift)
+    assert cogging.spread(drift, [], [x]) > 2 * REPLICATED_SPREAD
 
 
 def test_a_waves_period_is_chosen_again_beside_the_effect_it_is_paired_with(

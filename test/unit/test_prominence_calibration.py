@@ -14,12 +14,17 @@ import prominence_calibration  # noqa: E402
 
 
 def _step(
-    periods: int, prominence: float, cycles: float, *, eligible: bool = True
+    periods: int,
+    prominence: float,
+    cycles: float,
+    *,
+    eligible: bool = True,
+    spread: float | None = None,
 ) -> dict[str, Any]:
     return {
         "stage": "ForceView", "before": ["payload_gravity"], "periods": periods,
         "amplitude_nm": 0.04, "prominence": prominence, "cycles": cycles, "gain": 0.5,
-        "eligible": eligible, "names": False,
+        "eligible": eligible, "names": False, "spread": spread,
     }  # fmt: skip
 
 
@@ -52,3 +57,24 @@ def test_a_threshold_counts_absent_campaigns_and_hidden_ones_at_their_true_perio
     assert waived["30.0"] == {"absent_named": 0, "hidden_named": 0}
     assert data["absent_largest"] == [9.0, 0.0]
     assert data["hidden_true_largest"] == [20.0, 0.0]
+
+
+def test_the_spread_table_counts_waves_every_trial_shows_alike_over_enough_periods() -> None:
+    """Absent: a spread of 0.25 over 1.8 periods of travel (a smooth torque) is banded but
+    never counts; one of 0.7 over 4 periods counts from 0.8 up. Hidden (N = 100): 0.3 at N =
+    101 counts from 0.3 up; 0.1 at a wrong period (N = 150) never. A campaign logged before
+    the spread was measured is left out."""
+    rows = [
+        _row("zoo_1", [_step(30, 2.0, 1.8, spread=0.25), _step(60, 2.0, 4.0, spread=0.7)], None),
+        _row("zoo_2", [_step(101, 2.0, 5.0, spread=0.3), _step(150, 2.0, 7.0, spread=0.1)], 100),
+        _row("zoo_3", [{k: v for k, v in _step(40, 2.0, 5.0).items() if k != "spread"}], None),
+    ]
+    _lines, data = prominence_calibration.table(rows)
+    spread = data["spread"]
+    assert spread["measured"] == 2
+    assert spread["named"]["0.6"] == {"absent_named": 0, "hidden_named": 1}
+    assert spread["named"]["0.8"] == {"absent_named": 1, "hidden_named": 1}
+    assert spread["named"]["0.2"] == {"absent_named": 0, "hidden_named": 0}
+    first, _middle, last = spread["bands"]
+    assert first["absent_least"] == [0.25] and first["hidden_true"] == []
+    assert last["absent_least"] == [0.7] and last["hidden_true"] == [0.3]

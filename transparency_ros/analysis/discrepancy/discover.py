@@ -69,6 +69,7 @@ from transparency_ros.analysis.discrepancy.steps import (
     not_named,
     null_inside,
     same,
+    scan_facts,
     share_needed,
     total,
 )
@@ -475,11 +476,7 @@ class Discoverer:
             # the share of the error above the floor it removes (of one sensor's: _judged)
             gain=float((before - after) / max(before - floor, 1e-12)),
             judged=judged,
-            scanned=[
-                (float(a.prominence), float(getattr(a, "wave_cycles", 0.0)))
-                for a in added
-                if getattr(a, "prominence", None) is not None
-            ],
+            scanned=scan_facts(self.problem, effects, added, params),
             result=result,
             # (and, where the problem says which, not at the cost of what it does not judge:
             # a load-cell fit that worsens the kinematics, drop_force)

@@ -423,6 +423,11 @@ class DropProblem:
             return self._encoder_elements, self._sensor_noise[0]
         return self._encoder_elements, self._encoder_floor
 
+    def trial_index(self, held: bool) -> npt.NDArray[np.int64]:
+        """The trial (of the fitting or held-out set) each element of :meth:`error` is of."""
+        s = self.held if held else self.fit
+        return np.concatenate([np.full(t.size, i) for i, _, t in s.layout()]).astype(np.int64)
+
     @cached_property
     def _encoder_elements(self) -> BoolArray:
         return np.concatenate(

@@ -31,6 +31,9 @@ COGGING_FINALISTS = 5  # periods of the linear scan simulated at their fitted si
 # sin(x / 2) / (x / 2) = 0.97 of their shape (the free phase centres the drift); the best few
 # are then scanned at every period around them
 COGGING_DRIFT_RAD = math.pi / 4
+# the waves DropCogging.spread fits per trial: none, a sine and a cosine of the probe's size
+PROBES = ((0.0, 0.0), (COGGING_PROBE_NM, 0.0), (COGGING_PROBE_NM, math.pi / 2))
+SPREAD_CAP = 3.0  # a trial's wave this many times the fitted one's size off counts as this
 
 if TYPE_CHECKING:
     from transparency_ros.analysis.discrepancy.drop import DropProblem
@@ -122,6 +125,45 @@ class DropCogging(DropEffect):
         self.prominence = chosen / typical if typical > 0 else (math.inf if chosen > 0 else 0.0)
         self.wave_cycles = self.periods * span / (2 * math.pi)
         return start
+
+    def spread(
+        self, problem: DropProblem, effects: Sequence[DropEffect], params: Sequence[FloatArray]
+    ) -> float:
+        """How far the wave each trial shows on its own lies from the wave fitted to all of
+        them (``params``: the effects' parameters, this wave's last), as a share of its size:
+        each trial's size and phase of the wave at this period (linear least squares on its
+        own error, fitting and held-out trials alike), its distance from the fitted wave over
+        the fitted wave's size (at most SPREAD_CAP), weighted by the error each trial's own
+        wave removes. A cogging is the motor's: every trial shows the same wave, whatever
+        else the model misses (0.10-0.45 where the scan found a hidden cogging's period, on
+        zoo campaigns 11300-11399 and 11727). A wave that stands in for something else is a
+        different one in each trial (1.2-3 over 2.5 periods of travel and more where none is
+        hidden, 11300-11499); over fewer periods a wave stands in for a smooth torque that
+        every trial shows alike (0.15-0.3 at 1.7-1.9 periods). NaN where the problem does not
+        say which trial each element is of (the load cell's bins). See
+        benchmarks/prominence_calibration.py."""
+        index = getattr(problem, "trial_index", None)
+        amplitude, phase = float(params[-1][0]), float(params[-1][1])
+        if index is None or amplitude <= 0:
+            return math.nan
+        fitted = amplitude * np.array([math.cos(phase), math.sin(phase)]) / COGGING_PROBE_NM
+        before = list(params[:-1])
+        sets = [[*before, np.array([size, shift, self.periods])] for size, shift in PROBES]
+        weights, distances = [], []
+        for held in (False, True):
+            base, sine, cosine = problem.error_sets([*effects, _CoggingProbe()], sets, held)
+            trial = index(held)
+            for i in np.unique(trial):
+                m = trial == i
+                basis = np.stack([sine[m] - base[m], cosine[m] - base[m]], axis=1)
+                own = np.linalg.lstsq(basis, -base[m], rcond=None)[0]
+                left = base[m] + basis @ own
+                weights.append(max(float(base[m] @ base[m] - left @ left), 0.0))
+                distances.append(
+                    min(float(np.linalg.norm(own - fitted) / np.linalg.norm(fitted)), SPREAD_CAP)
+                )
+        total = sum(weights)
+        return float(np.dot(weights, distances) / total) if total > 0 else math.nan
 
 
 def _linear_scan(

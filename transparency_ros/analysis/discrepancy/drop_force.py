@@ -120,6 +120,8 @@ class ForceView:
 
     channel = "load cell in the ride"
     unit = "times its uncertainty"
+    # its bins pool the trials: no refit per trial (DropCogging.spread), not the problem's
+    trial_index = None
     pairs = False
     joint_refit = False
     declared_stage = False

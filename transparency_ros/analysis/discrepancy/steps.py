@@ -26,6 +26,12 @@ EXPECTED_MARGIN = 1.10  # an effect the recording predicts is preferred this clo
 # 1.25-2 periods no more than 7.7, as over 2 and more; hence 1.5, not 2 as before.)
 PROMINENT_WAVE = 15.0
 WAVE_CYCLES = 1.5
+# A wave whose period does not stand out may still be the motor's: where every trial, fitted
+# on its own, shows the same wave (its ``spread``, drop_cogging.DropCogging.spread, at most
+# REPLICATED_SPREAD) over REPLICATED_CYCLES periods of travel at least, the share is waived
+# too. Below that, a wave stands in for a smooth torque that every trial shows alike.
+REPLICATED_SPREAD = 0.5
+REPLICATED_CYCLES = 2.5
 
 
 @dataclass
@@ -61,8 +67,9 @@ class Step:
     shown: bool = False  # stands for a declared effect the recording shows (see _each_added)
     elsewhere: str = ""  # what a second channel showed of it (a problem's shows_elsewhere)
     # of an added effect whose choice was made from the data by a scan (cogging's period):
-    # (its prominence, the periods the arm's travel spans) when the step was made
-    scanned: list[tuple[float, float]] = field(default_factory=list)
+    # (its prominence, the periods the arm's travel spans, its spread over the trials: NaN
+    # where not measured) when the step was made (see scan_facts)
+    scanned: list[tuple[float, float, float]] = field(default_factory=list)
 
     def new(self) -> list[tuple[Any, FloatArray]]:
         return list(zip(self.added, self.params[len(self.params) - len(self.added) :], strict=True))
@@ -101,15 +108,35 @@ def null_inside(step: Step) -> bool:
 def share_needed(step: Step, uniform: float) -> float:
     """The share of the error above the floor ``step`` must remove (Discoverer._names):
     ``uniform``; none for a single wave whose period stands out of its scan
-    (``PROMINENT_WAVE``, over ``WAVE_CYCLES`` periods of travel at least)."""
-    if (
-        len(step.added) == 1
-        and step.scanned
-        and step.scanned[0][0] >= PROMINENT_WAVE
-        and step.scanned[0][1] >= WAVE_CYCLES
-    ):
-        return 0.0
+    (``PROMINENT_WAVE``, over ``WAVE_CYCLES`` periods of travel at least) or that every
+    trial shows alike (``REPLICATED_SPREAD``, over ``REPLICATED_CYCLES`` periods at least)."""
+    if len(step.added) == 1 and step.scanned:
+        prominence, cycles, spread = step.scanned[0]
+        if (prominence >= PROMINENT_WAVE and cycles >= WAVE_CYCLES) or (
+            cycles >= REPLICATED_CYCLES and spread <= REPLICATED_SPREAD
+        ):
+            return 0.0
     return uniform
+
+
+def scan_facts(
+    problem: Any, effects: list[Any], added: list[Any], params: list[FloatArray]
+) -> list[tuple[float, float, float]]:
+    """``Step.scanned`` of the effects ``added`` to ``effects`` (all parameters ``params``):
+    for each whose choice a scan made, (prominence, periods of travel, spread). The spread
+    (a refit per trial) is measured for a single wave over ``WAVE_CYCLES`` periods of travel
+    or more, the only one a waived share can name (NaN otherwise)."""
+    out = []
+    for a in added:
+        if getattr(a, "prominence", None) is None:
+            continue
+        cycles = float(getattr(a, "wave_cycles", 0.0))
+        spread: Callable[..., float] | None = getattr(a, "spread", None)
+        if spread is not None and len(added) == 1 and cycles >= WAVE_CYCLES:
+            out.append((float(a.prominence), cycles, spread(problem, effects, params)))
+        else:
+            out.append((float(a.prominence), cycles, math.nan))
+    return out
 
 
 def not_named(remaining: list[Any], effects: list[Any]) -> list[Any]:
