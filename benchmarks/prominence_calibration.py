@@ -255,8 +255,9 @@ def _spread_table(
         f"## Spread over the trials (REPLICATED_SPREAD = {REPLICATED_SPREAD:g},"
         f" REPLICATED_CYCLES = {REPLICATED_CYCLES:g})",
         "",
-        f"Campaigns whose logs measured it: {len(measured)} (absent {len(absent)}, hidden"
-        f" {len(hidden)}). A wave every trial shows alike (spread at most the threshold) over"
+        f"Campaigns with a cogging step whose spread was logged: {len(measured)} (absent"
+        f" {len(absent)}, hidden {len(hidden)}; logs made before it was measured carry none)."
+        " A wave every trial shows alike (spread at most the threshold) over"
         f" {REPLICATED_CYCLES:g} periods of travel or more is named without the share.",
         "",
         "| spread at most | absent campaigns that would name a wave | hidden campaigns whose"
