@@ -135,7 +135,7 @@ class DropCogging(DropEffect):
         own error, fitting and held-out trials alike), its distance from the fitted wave over
         the fitted wave's size (at most SPREAD_CAP), weighted by the error each trial's own
         wave removes. A cogging is the motor's: every trial shows the same wave, whatever
-        else the model misses (0.10-0.45 where the scan found a hidden cogging's period, on
+        else the model misses (0.10-0.46 where the scan found a hidden cogging's period, on
         zoo campaigns 11300-11399 and 11727). A wave that stands in for something else is a
         different one in each trial (1.2-3 over 2.5 periods of travel and more where none is
         hidden, 11300-11499); over fewer periods a wave stands in for a smooth torque that
