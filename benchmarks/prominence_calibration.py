@@ -86,6 +86,20 @@ def _kind(truth: dict[str, Any]) -> str:
     return "" if "cogging" in truth["allowed"] else "absent"
 
 
+def _eligible(
+    r: dict[str, Any], band: tuple[float, float], *, true: bool = False
+) -> list[dict[str, Any]]:
+    """The eligible steps of campaign ``r`` over ``band`` periods of travel (of the true
+    period only: ``true``)."""
+    return [
+        s
+        for s in r["steps"]
+        if s["eligible"]
+        and band[0] <= s["cycles"] < band[1]
+        and (not true or _true_period(s, r["truth"]))
+    ]
+
+
 def _true_period(step: dict[str, Any], truth: dict[str, Any]) -> bool:
     true = truth["params"].get("cogging_periods_per_rev")
     return bool(true) and abs(step["periods"] - true) <= PERIOD_TOLERANCE * true
@@ -105,15 +119,7 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
     def prominences(
         r: dict[str, Any], band: tuple[float, float], *, true: bool = False
     ) -> list[float]:
-        """The prominences of the eligible steps over ``band`` periods of travel (of the true
-        period only: ``true``)."""
-        return [
-            s["prominence"]
-            for s in r["steps"]
-            if s["eligible"]
-            and band[0] <= s["cycles"] < band[1]
-            and (not true or _true_period(s, r["truth"]))
-        ]
+        return [s["prominence"] for s in _eligible(r, band, true=true)]
 
     def most(r: dict[str, Any], band: tuple[float, float], *, true: bool = False) -> float:
         return max(prominences(r, band, true=true), default=0.0)
@@ -214,21 +220,17 @@ def _spread_table(
         REPLICATED_SPREAD,
     )
 
-    measured = [r for r in absent + hidden if any("spread" in s for s in r["steps"])]
-    absent = [r for r in absent if r in measured]
-    hidden = [r for r in hidden if r in measured]
+    def logged(r: dict[str, Any]) -> bool:
+        return any("spread" in s for s in r["steps"])
+
+    absent = [r for r in absent if logged(r)]
+    hidden = [r for r in hidden if logged(r)]
+    measured = absent + hidden
 
     def least(r: dict[str, Any], band: tuple[float, float], *, true: bool = False) -> float:
         """The smallest spread of the eligible steps over ``band`` periods of travel."""
         return min(
-            (
-                s["spread"]
-                for s in r["steps"]
-                if s["eligible"]
-                and s.get("spread") is not None
-                and band[0] <= s["cycles"] < band[1]
-                and (not true or _true_period(s, r["truth"]))
-            ),
+            (s["spread"] for s in _eligible(r, band, true=true) if s.get("spread") is not None),
             default=math.inf,
         )
 
