@@ -137,11 +137,11 @@ class DropCogging(DropEffect):
         wave removes. A cogging is the motor's: every trial shows the same wave, whatever
         else the model misses (0.10-0.46 where the scan found a hidden cogging's period, on
         zoo campaigns 11300-11399 and 11727). A wave that stands in for something else is a
-        different one in each trial (1.2-3 over 2.5 periods of travel and more where none is
-        hidden, 11300-11499); over fewer periods a wave stands in for a smooth torque that
-        every trial shows alike (0.15-0.3 at 1.7-1.9 periods). NaN where the problem does not
-        say which trial each element is of (the load cell's bins). See
-        benchmarks/prominence_calibration.py."""
+        different one in each trial (over 2.5 periods of travel and more where none is hidden,
+        11300-11499 and 11700-11799: 0.56 and 0.69 the least, most 1.2-3); over fewer
+        periods a wave stands in for a smooth torque that every trial shows alike (0.15-0.3
+        at 1.7-1.9 periods). NaN where the problem does not say which trial each element is
+        of (the load cell's bins). See benchmarks/prominence_calibration.py."""
         index = getattr(problem, "trial_index", None)
         amplitude, phase = float(params[-1][0]), float(params[-1][1])
         if index is None or amplitude <= 0:

@@ -125,7 +125,10 @@ def scan_facts(
     """``Step.scanned`` of the effects ``added`` to ``effects`` (all parameters ``params``):
     for each whose choice a scan made, (prominence, periods of travel, spread). The spread
     (a refit per trial) is measured for a single wave over ``WAVE_CYCLES`` periods of travel
-    or more, the only one a waived share can name (NaN otherwise)."""
+    or more (NaN otherwise): the rule asks for it from ``REPLICATED_CYCLES`` on, and the
+    calibration (benchmarks/prominence_calibration.py) logs it from ``WAVE_CYCLES`` to show
+    why not lower. It is measured whether or not the step meets the share without it (two
+    batched simulations a cogging step, beside the scan's dozens)."""
     out = []
     for a in added:
         if getattr(a, "prominence", None) is None:
