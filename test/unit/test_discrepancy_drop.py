@@ -351,6 +351,77 @@ def test_a_wave_every_trial_shows_alike_has_a_small_spread(tmp_path: Path) -> No
     assert cogging.spread(drift, [], [x]) > 2 * REPLICATED_SPREAD
 
 
+@pytest.mark.parametrize("offset_nm", [0.06, 0.013, 0.0])
+def test_a_drift_with_no_coulomb_torque_gives_way_to_the_offset_it_stood_for(
+    tmp_path: Path, offset_nm: float
+) -> None:
+    """The tool's own simulation (EC60: tau_coul 0.026 N m) with the reflected inertia x1.8
+    and an offset; the model the search ended with given as a drift of the inertia x1.8
+    with no Coulomb torque. With an offset of 0.06 N m hidden, the drift gives way to the
+    drift of the inertia beside an offset of the hidden size, the Coulomb torque back at
+    nominal, and a note says so. With half the Coulomb torque hidden (fitted so), it is not
+    the torque a Coulomb torque of nothing stood for; with none, the offset fitted is not
+    told from nothing: the drift stays as it was."""
+    from transparency_ros.analysis.discrepancy.drop_effects import DropDrift  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.findings import Finding, Report  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.revisit import (  # noqa: PLC0415
+        friction_given_away,
+    )
+
+    problem = _self_simulated(
+        tmp_path, rotor_inertia_kgm2=1.8 * 2.27e-3, torque_offset_nm=offset_nm
+    )
+    drift, x = DropDrift(), np.array([1.8, 1.0, 0.0])
+    kept, start, taker = drift.gives_way(x)
+    assert isinstance(kept, DropDrift) and kept.free == (True, False, False)
+    assert start.tolist() == [1.8] and taker == "torque_offset"
+    loop = Discoverer(problem)
+    report = Report(problem.nominal, problem.split)
+    report.findings = [
+        Finding(
+            "parameter_drift",
+            dict(zip(drift.param_names, x.tolist(), strict=True)),
+            {n: (v, v) for n, v in zip(drift.param_names, x.tolist(), strict=True)},
+            {},
+            "",
+            math.nan,
+            math.nan,
+        )
+    ]
+    effects, params = friction_given_away(loop, report, [drift], [x], problem.noise_floor())
+    if offset_nm < 0.026:
+        assert effects == [drift] and params[0] is x and len(report.findings) == 1
+        assert report.notes == []
+        return
+    assert [e.name for e in effects] == ["parameter_drift", "torque_offset"]
+    assert effects[0].free == (True, False, False)
+    assert params[0][0] == pytest.approx(1.8, rel=0.05)
+    assert params[1][0] == pytest.approx(offset_nm, rel=0.05)
+    found = {f.effect: f for f in report.findings}
+    assert set(found["parameter_drift"].parameters) == set(DropDrift.TERMS)
+    assert found["parameter_drift"].parameters["coulomb_scale"] == 1.0
+    assert list(found["parameter_drift"].confidence_interval) == ["reflected_inertia_scale"]
+    lo, hi = found["torque_offset"].confidence_interval["offset_nm"]
+    assert lo < offset_nm < hi
+    assert any("no Coulomb torque" in n for n in report.notes)
+
+
+def test_a_drift_gives_way_only_where_its_coulomb_torque_is_fitted_to_nothing() -> None:
+    from transparency_ros.analysis.discrepancy.drop_effects import (  # noqa: PLC0415
+        DropDrift,
+        DropOffset,
+    )
+
+    assert DropDrift().gives_way(np.array([1.8, 1.0, 0.2])) is None
+    assert DropDrift((True, True, False)).gives_way(np.array([1.8, 1.0])) is None
+    kept, start, _ = DropDrift().gives_way(np.array([1.02, 0.9, 0.01]))  # type: ignore[misc]
+    assert kept is None and start.size == 0  # nothing else drifted: the offset alone
+    kept, start, _ = DropDrift().gives_way(np.array([0.5, 1.6, 0.0]))  # type: ignore[misc]
+    assert kept.free == (True, True, False) and start.tolist() == [0.5, 1.6]
+    offset = DropOffset(0.026)
+    assert offset.takes_friction(np.array([-0.03])) and not offset.takes_friction(np.array([0.02]))
+
+
 def test_a_waves_period_is_chosen_again_beside_the_effect_it_is_paired_with(
     tmp_path: Path,
 ) -> None:

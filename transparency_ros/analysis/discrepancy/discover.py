@@ -58,7 +58,11 @@ from transparency_ros.analysis.discrepancy.fitting import (
 )
 from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel, Trial
 from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
-from transparency_ros.analysis.discrepancy.revisit import rivals_again, still_needed
+from transparency_ros.analysis.discrepancy.revisit import (
+    friction_given_away,
+    rivals_again,
+    still_needed,
+)
 from transparency_ros.analysis.discrepancy.steps import (
     ALIKE,
     PROMINENT_WAVE,  # noqa: F401 - the wave's thresholds, read here by tests and benchmarks
@@ -129,6 +133,7 @@ class Discoverer:
         searched = effects
         effects, params = rivals_again(self, report, effects, params, floor)
         effects, params = still_needed(self, report, effects, params, floor)
+        effects, params = friction_given_away(self, report, effects, params, floor)
         if effects is not searched:  # (each returns the model it was given where it keeps it)
             held_err = problem.error(effects, params, True)
         effects, params, held_err = self._checked_last(

@@ -84,6 +84,7 @@ class DropDrift(DropEffect):
     apart by the fit."""
 
     TERMS = ("reflected_inertia_scale", "viscous_scale", "coulomb_scale")
+    UPPER = 5.0  # every term's largest scale
 
     def __init__(self, free: tuple[bool, bool, bool] = (True, True, True)) -> None:
         names = tuple(n for n, f in zip(self.TERMS, free, strict=True) if f)
@@ -92,7 +93,7 @@ class DropDrift(DropEffect):
             "parameter_drift",
             names,
             lower,
-            tuple(5.0 for _ in names),
+            tuple(self.UPPER for _ in names),
             null=tuple(1.0 for _ in names),
         )
         self.free = free
@@ -122,6 +123,24 @@ class DropDrift(DropEffect):
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {n: 1.0 for n, f in zip(self.TERMS, self.free, strict=True) if not f}
+
+    def gives_way(self, p: FloatArray) -> tuple[DropDrift | None, FloatArray, str] | None:
+        """Where its Coulomb scale is fitted to nothing (within 1 % of its range of 0, as
+        ``pinned`` reads a bound): the drift with its other terms that drifted (None where
+        none did), their values, and the effect that takes the Coulomb part's place, an offset
+        (``revisit.friction_given_away``). The fit would have gone below no friction if it
+        could: it wants a torque along the motion, which no friction gives and an offset is
+        (zoo_11801: an inertia x1.88 and an offset of 0.076 N m named as a drift of the
+        inertia x1.90 with no Coulomb torque at all). None where the Coulomb term is not free
+        or not at zero."""
+        s = self.scales(p)
+        if not self.free[2] or s[2] > 0.01 * self.UPPER:
+            return None
+        moved = drifted_terms(s) & np.array(self.free)
+        moved[2] = False  # (the Coulomb term)
+        if not moved.any():
+            return None, np.empty(0), "torque_offset"
+        return DropDrift((bool(moved[0]), bool(moved[1]), False)), s[moved], "torque_offset"
 
     def reduced(self, p: FloatArray) -> tuple[DropDrift, FloatArray] | None:
         """The drift with its terms that did not drift (within ``DRIFT_MIN`` of nominal) held,
@@ -451,10 +470,17 @@ class DropOffset(DropEffect):
 
     def __init__(self, coulomb_nm: float) -> None:
         super().__init__("torque_offset", ("offset_nm",), (-2.0,), (2.0,), null=(0.0,))
+        self.coulomb_nm = coulomb_nm
         self.least_nm = FRICTION_BAND_SHARE * coulomb_nm
 
     def meaningful(self, p: FloatArray) -> bool:
         return super().meaningful(p) and abs(float(p[0])) >= self.least_nm
+
+    def takes_friction(self, p: FloatArray) -> bool:
+        """Whether it is the torque a drift fitted with no Coulomb torque stood for
+        (``revisit.friction_given_away``): at least the model's Coulomb torque, which that fit
+        would have gone below nothing to give."""
+        return abs(float(p[0])) >= self.coulomb_nm
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
         return replace(ph, torque_offset_nm=float(p[0]) * np.asarray(ph.sense, dtype=float))
