@@ -351,6 +351,35 @@ def test_a_wave_every_trial_shows_alike_has_a_small_spread(tmp_path: Path) -> No
     assert cogging.spread(drift, [], [x]) > 2 * REPLICATED_SPREAD
 
 
+def _given_away(
+    problem: DropProblem, effects: list[Any], params: list[np.ndarray]
+) -> tuple[list[Any], list[np.ndarray], Any]:
+    """revisit.friction_given_away on the final model ``effects`` (``params``), each with a
+    finding of its values: (effects, parameters, report) after it."""
+    from transparency_ros.analysis.discrepancy.findings import Finding, Report  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.revisit import (  # noqa: PLC0415
+        friction_given_away,
+    )
+
+    report = Report(problem.nominal, problem.split)
+    report.findings = [
+        Finding(
+            e.name,
+            dict(zip(e.param_names, x.tolist(), strict=True)),
+            {n: (v, v) for n, v in zip(e.param_names, x.tolist(), strict=True)},
+            {},
+            "",
+            math.nan,
+            math.nan,
+        )
+        for e, x in zip(effects, params, strict=True)
+    ]
+    effects, params = friction_given_away(
+        Discoverer(problem), report, effects, params, problem.noise_floor()
+    )
+    return effects, params, report
+
+
 @pytest.mark.parametrize("offset_nm", [0.06, 0.013, 0.0])
 def test_a_drift_with_no_coulomb_torque_gives_way_to_the_offset_it_stood_for(
     tmp_path: Path, offset_nm: float
@@ -363,10 +392,6 @@ def test_a_drift_with_no_coulomb_torque_gives_way_to_the_offset_it_stood_for(
     the torque a Coulomb torque of nothing stood for; with none, the offset fitted is not
     told from nothing: the drift stays as it was."""
     from transparency_ros.analysis.discrepancy.drop_effects import DropDrift  # noqa: PLC0415
-    from transparency_ros.analysis.discrepancy.findings import Finding, Report  # noqa: PLC0415
-    from transparency_ros.analysis.discrepancy.revisit import (  # noqa: PLC0415
-        friction_given_away,
-    )
 
     problem = _self_simulated(
         tmp_path, rotor_inertia_kgm2=1.8 * 2.27e-3, torque_offset_nm=offset_nm
@@ -375,20 +400,7 @@ def test_a_drift_with_no_coulomb_torque_gives_way_to_the_offset_it_stood_for(
     kept, start, taker = drift.gives_way(x)
     assert isinstance(kept, DropDrift) and kept.free == (True, False, False)
     assert start.tolist() == [1.8] and taker == "torque_offset"
-    loop = Discoverer(problem)
-    report = Report(problem.nominal, problem.split)
-    report.findings = [
-        Finding(
-            "parameter_drift",
-            dict(zip(drift.param_names, x.tolist(), strict=True)),
-            {n: (v, v) for n, v in zip(drift.param_names, x.tolist(), strict=True)},
-            {},
-            "",
-            math.nan,
-            math.nan,
-        )
-    ]
-    effects, params = friction_given_away(loop, report, [drift], [x], problem.noise_floor())
+    effects, params, report = _given_away(problem, [drift], [x])
     if offset_nm < 0.026:
         assert effects == [drift] and params[0] is x and len(report.findings) == 1
         assert report.notes == []
@@ -404,6 +416,28 @@ def test_a_drift_with_no_coulomb_torque_gives_way_to_the_offset_it_stood_for(
     lo, hi = found["torque_offset"].confidence_interval["offset_nm"]
     assert lo < offset_nm < hi
     assert any("no Coulomb torque" in n for n in report.notes)
+
+
+def test_an_offset_named_beside_a_drift_with_no_coulomb_torque_takes_its_coulomb_part(
+    tmp_path: Path,
+) -> None:
+    """As above, the offset (0.06 N m hidden) named already at a third of its size beside the
+    drift with no Coulomb torque: the drift is held to its inertia and both refitted, the
+    offset to its hidden size."""
+    from transparency_ros.analysis.discrepancy.drop_effects import DropDrift  # noqa: PLC0415
+
+    problem = _self_simulated(tmp_path, rotor_inertia_kgm2=1.8 * 2.27e-3, torque_offset_nm=0.06)
+    offset = next(c for c in problem.candidates() if c.name == "torque_offset")
+    effects, params, report = _given_away(
+        problem, [DropDrift(), offset], [np.array([1.8, 1.0, 0.0]), np.array([0.02])]
+    )
+    assert [e.name for e in effects] == ["parameter_drift", "torque_offset"]
+    assert effects[0].free == (True, False, False)
+    assert params[0][0] == pytest.approx(1.8, rel=0.05)
+    assert params[1][0] == pytest.approx(0.06, rel=0.05)
+    assert [f.effect for f in report.findings] == ["parameter_drift", "torque_offset"]
+    assert report.findings[1].parameters["offset_nm"] == pytest.approx(0.06, rel=0.05)
+    assert report.findings[0].parameters["coulomb_scale"] == 1.0
 
 
 def test_a_drift_gives_way_only_where_its_coulomb_torque_is_fitted_to_nothing() -> None:

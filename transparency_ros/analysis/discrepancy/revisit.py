@@ -134,15 +134,18 @@ def friction_given_away(
     none) and the effect that takes the Coulomb part (an offset), that one fitted with all
     the others. Taken, with a note, where the model then explains the held-out recordings
     alike (``ALIKE``: with no more parameters, where ``steps.choose`` takes the simpler of
-    two alike), the taker is meaningful, its interval excludes its null and it is the torque the
-    zero friction stood for (``takes_friction``: an offset at least the model's Coulomb
-    torque); otherwise the drift stays. Where the arm turns one way through its recordings,
-    the two are the same torque; where it turns back or comes to rest, the fit tells them
-    apart. On the final model, not in the search: there a Coulomb torque of nothing also
-    stands in for an effect found later (zoo_11463: for a hub spring; an offset named in
-    its place stayed named at -0.001 N m). On zoo_11463's final model the offset fitted in
-    its place is 0.23 of the Coulomb torque (refused); on zoo_11801 and zoo_11829, each
-    hiding an offset beside a drift, 2.3 and 3.5 times it."""
+    two alike), the taker is meaningful, its interval excludes its null and it is the torque
+    the zero friction stood for (``takes_friction``: an offset at least the model's Coulomb
+    torque); otherwise the drift stays. Where the taker is named already, the Coulomb part
+    is given to it: the drift held to its other terms and every parameter refitted, taken
+    where alike (zoo_11839: an offset of -0.029 N m named beside an inertia drift with no
+    Coulomb torque, -0.063 hidden). Where the arm turns one way through its recordings, the
+    two are the same torque; where it turns back or comes to rest, the fit tells them apart.
+    On the final model, not in the search: there a Coulomb torque of nothing also stands in
+    for an effect found later (zoo_11463: for a hub spring; an offset named in its place
+    stayed named at -0.001 N m). On zoo_11463's final model the offset fitted in its place
+    is 0.23 of the Coulomb torque (refused); on zoo_11801 and zoo_11829, each hiding an
+    offset beside a drift, 2.3 and 3.5 times it."""
     hit = next(
         (
             (i, way)
@@ -151,48 +154,61 @@ def friction_given_away(
         ),
         None,
     )
-    if hit is None:
+    taker = None if hit is None else _candidate(loop, hit[1][2])
+    if hit is None or taker is None:
         return effects, params
-    i, (kept, start, taker_name) = hit
-    taker = next((c for c in loop.problem.candidates() if c.name == taker_name), None)
-    if taker is None or any(same(taker, e) for e in effects):
-        return effects, params
+    i, (kept, start, _) = hit
     problem, drift, finding = loop.problem, effects[i], report.findings[i]
-    others, rest = effects[:i] + effects[i + 1 :], params[:i] + params[i + 1 :]
-    if kept is not None:
-        others, rest = [*others, kept], [*rest, start]
-    err = problem.error(others, rest, True)
-    base = Base(err, rmse(err), aic(err, total(rest)), floor, others, rest)
-    step = loop._single(others, rest, taker, base)
     before = rmse(problem.error(effects, params, True))
-    if not (
-        step.rmse <= ALIKE * before
-        and step.meaningful
-        and not null_inside(step)
-        and getattr(taker, "takes_friction", lambda _p: True)(step.params[-1])
-    ):
-        return effects, params
-    loop.progress(f"{drift.name} with no Coulomb torque gives way to {taker.name}")
-    unit = getattr(problem, "unit", "rad")
+    # the drift held to the terms that drifted, in its place (or gone where none did)
+    instead = [] if kept is None else [kept]
+    held = effects[:i] + instead + effects[i + 1 :]
+    held_params = params[:i] + ([] if kept is None else [start]) + params[i + 1 :]
     findings = report.findings[:i] + report.findings[i + 1 :]
     if kept is not None:  # the drift's finding, of the terms that drifted
-        x = step.params[len(others) - 1]
-        findings.append(
+        findings.insert(
+            i,
             replace(
                 finding,
-                parameters={n: float(v) for n, v in zip(kept.param_names, x, strict=True)}
-                | kept.extra_parameters(x),
+                parameters={n: float(v) for n, v in zip(kept.param_names, start, strict=True)}
+                | kept.extra_parameters(start),
                 confidence_interval={n: finding.confidence_interval[n] for n in kept.param_names},
-            )
+            ),
         )
-    report.findings = [*findings, loop._finding(taker, step, base, base.rmse, step.rmse)]
+    if any(same(taker, e) for e in effects):  # named already: the Coulomb part given to it
+        new_params, result = refit(problem, held, held_params)
+        after = rmse(problem.error(held, new_params, True))
+        if after > ALIKE * before:
+            return effects, params
+        new_effects = held
+    else:
+        err = problem.error(held, held_params, True)
+        base = Base(err, rmse(err), aic(err, total(held_params)), floor, held, held_params)
+        step = loop._single(held, held_params, taker, base)
+        if not (
+            step.rmse <= ALIKE * before
+            and step.meaningful
+            and not null_inside(step)
+            and getattr(taker, "takes_friction", lambda _p: True)(step.params[-1])
+        ):
+            return effects, params
+        findings.append(loop._finding(taker, step, base, base.rmse, step.rmse))
+        new_effects, new_params, after = [*held, taker], step.params, step.rmse
+        result = step.result if step.joint else None
+    unit = getattr(problem, "unit", "rad")
+    loop.progress(f"{drift.name} with no Coulomb torque gives way to {taker.name}")
+    report.findings = findings
     report.notes.append(
         f"{drift.name} fitted with no Coulomb torque ({before:.4g} {unit} held-out RMSE) explains"
         f" the recordings as {taker.name}"
         + ("" if kept is None else f" beside the drift of {', '.join(kept.param_names)}")
-        + f" does ({step.rmse:.4g} {unit}): named so, the Coulomb torque at its nominal value"
+        + f" does ({after:.4g} {unit}): named so, the Coulomb torque at its nominal value"
     )
-    effects, params = [*others, taker], step.params
-    if step.joint:  # every parameter refitted with it: the findings' values and intervals
-        update_findings(report, effects, params, interval(step.result, step.result.x))
-    return effects, params
+    if result is not None:  # every parameter refitted: the findings' values and intervals
+        update_findings(report, new_effects, new_params, interval(result, result.x))
+    return new_effects, new_params
+
+
+def _candidate(loop: Discoverer, name: str) -> Any:
+    """The problem's candidate called ``name`` (None where it has none)."""
+    return next((c for c in loop.problem.candidates() if c.name == name), None)
