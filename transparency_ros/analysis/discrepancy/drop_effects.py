@@ -12,7 +12,12 @@ import numpy as np
 from transparency_ros.analysis.discrepancy.drop_bounce import Bounces
 from transparency_ros.analysis.discrepancy.drop_clip import DriveClip
 from transparency_ros.analysis.discrepancy.drop_physics import DropPhysics
-from transparency_ros.analysis.discrepancy.effects import drifted, drifted_terms, pinned
+from transparency_ros.analysis.discrepancy.effects import (
+    BOUND_SHARE,
+    drifted,
+    drifted_terms,
+    pinned,
+)
 from transparency_ros.analysis.discrepancy.model import GRAVITY, FloatArray
 
 LOCAL_GRAVITY_SPREAD = 0.005  # of the weight: what local gravity may differ from the tool's g
@@ -125,16 +130,16 @@ class DropDrift(DropEffect):
         return {n: 1.0 for n, f in zip(self.TERMS, self.free, strict=True) if not f}
 
     def gives_way(self, p: FloatArray) -> tuple[DropDrift | None, FloatArray, str] | None:
-        """Where its Coulomb scale is fitted to nothing (within 1 % of its range of 0, as
-        ``pinned`` reads a bound): the drift with its other terms that drifted (None where
-        none did), their values, and the effect that takes the Coulomb part's place, an offset
-        (``revisit.friction_given_away``). The fit would have gone below no friction if it
+        """Where its Coulomb scale is fitted to nothing (within ``BOUND_SHARE`` of its range
+        of 0, as ``pinned`` reads a bound): the drift with its other terms that drifted (None
+        where none did), their values, and the effect that takes the Coulomb part's place, an
+        offset (``revisit.friction_given_away``). The fit would have gone below no friction if it
         could: it wants a torque along the motion, which no friction gives and an offset is
         (zoo_11801: an inertia x1.88 and an offset of 0.076 N m named as a drift of the
         inertia x1.90 with no Coulomb torque at all). None where the Coulomb term is not free
         or not at zero."""
         s = self.scales(p)
-        if not self.free[2] or s[2] > 0.01 * self.UPPER:
+        if not self.free[2] or s[2] > BOUND_SHARE * self.UPPER:  # (its range: 0 to UPPER)
             return None
         moved = drifted_terms(s) & np.array(self.free)
         moved[2] = False  # (the Coulomb term)

@@ -274,6 +274,7 @@ class ParameterDrift(Effect):
 
 
 DRIFT_MIN = 0.2  # a nominal value counts as wrong when off by more than 20 %
+BOUND_SHARE = 0.01  # a fit this share of its range from a bound is held there (pinned)
 
 
 def drifted_terms(scales: FloatArray) -> npt.NDArray[np.bool_]:
@@ -290,10 +291,8 @@ def pinned(p: FloatArray, lower: Sequence[float], upper: Sequence[float]) -> boo
     the drift then stands in for something it cannot be. A scale of 0 (a term that is not
     there) is plausible."""
     lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
-    x = np.asarray(p, dtype=float)
-    return bool(
-        np.any(x >= hi - 0.01 * (hi - lo)) or np.any((lo > 0) & (x <= lo + 0.01 * (hi - lo)))
-    )
+    x, near = np.asarray(p, dtype=float), BOUND_SHARE * (hi - lo)
+    return bool(np.any(x >= hi - near) or np.any((lo > 0) & (x <= lo + near)))
 
 
 def library() -> list[Effect]:
