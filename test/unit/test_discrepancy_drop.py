@@ -354,12 +354,20 @@ def test_a_wave_every_trial_shows_alike_has_a_small_spread(tmp_path: Path) -> No
 def _given_away(
     problem: DropProblem, effects: list[Any], params: list[np.ndarray]
 ) -> tuple[list[Any], list[np.ndarray], Any]:
-    """revisit.friction_given_away on the final model ``effects`` (``params``), each with a
-    finding of its values: (effects, parameters, report) after it."""
-    from transparency_ros.analysis.discrepancy.findings import Finding, Report  # noqa: PLC0415
+    """revisit.friction_given_away on the final model ``effects`` (``params``)."""
     from transparency_ros.analysis.discrepancy.revisit import (  # noqa: PLC0415
         friction_given_away,
     )
+
+    return _revisited(friction_given_away, problem, effects, params)
+
+
+def _revisited(
+    revisit: Any, problem: DropProblem, effects: list[Any], params: list[np.ndarray]
+) -> tuple[list[Any], list[np.ndarray], Any]:
+    """A decision of :mod:`revisit` taken on the final model ``effects`` (``params``), each
+    with a finding of its values: (effects, parameters, report) after it."""
+    from transparency_ros.analysis.discrepancy.findings import Finding, Report  # noqa: PLC0415
 
     report = Report(problem.nominal, problem.split)
     report.findings = [
@@ -374,10 +382,40 @@ def _given_away(
         )
         for e, x in zip(effects, params, strict=True)
     ]
-    effects, params = friction_given_away(
-        Discoverer(problem), report, effects, params, problem.noise_floor()
-    )
+    effects, params = revisit(Discoverer(problem), report, effects, params, problem.noise_floor())
     return effects, params, report
+
+
+@pytest.mark.parametrize(("width", "start"), [(0.015, 1.0), (0.015, -1.0)])
+def test_a_band_is_named_again_with_its_arm_on_the_far_flank_where_that_explains_it_alike(
+    tmp_path: Path, width: float, start: float
+) -> None:
+    """The tool's own simulation (EC60) with a dead band of 0.015 rad; the model the search
+    ended with given as the band with its start fitted. With the arm on the far flank hidden
+    and the band given twice as wide with the arm in its middle (the same free travel at
+    the strike, w (1 + start) / 2), the band on its far flank explains the recordings
+    alike and is named, at the hidden width, with a note. With the arm on the loaded flank
+    hidden (and given so), the arm's return shows the whole band, which no band on its far
+    flank explains: the band stays as it was."""
+    from transparency_ros.analysis.discrepancy.revisit import variants_again  # noqa: PLC0415
+
+    problem = _self_simulated(tmp_path, backlash_rad=width, backlash_start=start)
+    band = next(c for c in problem.candidates() if c.name == "backlash" and len(c.param_names) == 2)
+    given = np.array([2 * width, 0.0]) if start > 0 else np.array([width, start])
+    effects, params, report = _revisited(variants_again, problem, [band], [given])
+    if start < 0:
+        assert effects == [band] and params[0] is given and report.notes == []
+        assert report.findings[0].parameters["start_in_band"] == start
+        return
+    assert effects[0] is not band and effects[0].param_names == ("backlash_rad",)
+    assert effects[0].start == 1.0
+    assert params[0][0] == pytest.approx(width, rel=0.1)
+    (found,) = report.findings
+    assert set(found.parameters) == {"backlash_rad"}
+    assert found.parameters["backlash_rad"] == pytest.approx(width, rel=0.1)
+    lo, hi = found.confidence_interval["backlash_rad"]
+    assert lo < width < hi
+    assert any("variant with fewer parameters" in n for n in report.notes)
 
 
 @pytest.mark.parametrize("offset_nm", [0.06, 0.013, 0.0])

@@ -24,8 +24,9 @@ after each finding. A 95 % interval holding an effect's null value (``null``) na
 intervals are widened by the problem's ``model_error_share`` of the value at the end. A
 problem with a second channel (``force_view``: a drop test's load cell while the shuttle rides
 the arm) has the candidates not named searched once more there, the effects found held. What
-is left after the search (two decisions taken again on the final model first, ``revisit``: a
-shown effect against its rival, and each searched effect tried again without it) is checked
+is left after the search (decisions taken again on the final model first, ``revisit``: a
+shown effect against its rival, each searched effect tried again without it, an effect
+against its variants of fewer parameters, a drift with no Coulomb torque) is checked
 for structure (phase RMS against the noise floor, its dominant frequency, how much of it the
 state explains, the closest candidate) and reported as ``unexplained``, never forced onto a
 label.
@@ -62,6 +63,7 @@ from transparency_ros.analysis.discrepancy.revisit import (
     friction_given_away,
     rivals_again,
     still_needed,
+    variants_again,
 )
 from transparency_ros.analysis.discrepancy.steps import (
     ALIKE,
@@ -133,6 +135,7 @@ class Discoverer:
         searched = effects
         effects, params = rivals_again(self, report, effects, params, floor)
         effects, params = still_needed(self, report, effects, params, floor)
+        effects, params = variants_again(self, report, effects, params, floor)
         effects, params = friction_given_away(self, report, effects, params, floor)
         if effects is not searched:  # (each returns the model it was given where it keeps it)
             held_err = problem.error(effects, params, True)
