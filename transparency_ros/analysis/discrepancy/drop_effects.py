@@ -208,7 +208,8 @@ class DropBacklash(DropEffect):
     named on fresh zoo seeds 9400-9499 were 1.9-8x the truth; in 7 of them the travel was
     within 11 % of the true width. Both variants are candidates; where
     they explain the recordings alike, the one with fewer parameters is named
-    (``steps.choose``).
+    (``steps.choose``), and the choice is taken again on the final model
+    (``revisit.variants_again``: a rebound found after the band may have made them alike).
 
     A band narrower than ``least_rad`` (the RMS position error sensor noise alone gives: the
     problem's noise floor, or one count of the encoder where that is larger) names nothing:
