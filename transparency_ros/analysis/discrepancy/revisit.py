@@ -200,10 +200,10 @@ def variants_again(
             loop._searched.add(id(variant))
         effects, params = new_effects, new_params
         if best.joint:  # every parameter refitted with it: the findings' values and intervals
-            chunks, at = [], 0
+            ci, chunks, at = interval(best.result, best.result.x), [], 0
             for e, p in zip([*others, variant], best.params, strict=True):
                 size = p.size if e.fittable else 0
-                chunks.append(interval(best.result, best.result.x)[at : at + size])
+                chunks.append(ci[at : at + size])
                 at += size
             chunks = [*chunks[:i], chunks[k], *chunks[i:k]]
             update_findings(report, effects, params, [c for chunk in chunks for c in chunk])
