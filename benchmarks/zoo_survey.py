@@ -102,12 +102,16 @@ def analyse(campaign: Path) -> dict[str, Any]:
             [str(u.get("where", {}).get("phase")) for u in report.unexplained],
             None,
         )
+        # (what the report says besides its findings: a decision taken again on the final
+        # model, revisit.py, says so here; read afterwards, no re-run needed)
+        notes = list(report.notes)
     except Exception as err:  # noqa: BLE001 - a failure is a result here, with its reason
-        found, unexplained, error = {}, [], f"{type(err).__name__}: {err}"
+        found, unexplained, error, notes = {}, [], f"{type(err).__name__}: {err}", []
     return {
         "campaign": campaign.name,
         "found": found,
         "unexplained": unexplained,
+        "notes": notes,
         "error": error,
         "seconds": time.perf_counter() - started,
     }
