@@ -26,10 +26,9 @@ problem with a second channel (``force_view``: a drop test's load cell while the
 the arm) has the candidates not named searched once more there, the effects found held. What
 is left after the search (decisions taken again on the final model first, ``revisit``: a
 shown effect against its rival, each searched effect tried again without it, an effect
-against its variants of fewer parameters, a drift with no Coulomb torque) is checked
-for structure (phase RMS against the noise floor, its dominant frequency, how much of it the
-state explains, the closest candidate) and reported as ``unexplained``, never forced onto a
-label.
+against its variants of fewer parameters, a drift with no Coulomb torque) is checked for
+structure (phase RMS against the noise floor, its dominant frequency, how much of it the state
+explains, the closest candidate) and reported as ``unexplained``, never forced onto a label.
 """
 
 from __future__ import annotations
