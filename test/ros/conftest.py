@@ -24,7 +24,7 @@ from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 
-from transparency_ros.rosenv import pick_domain_id  # noqa: E402
+from transparency_ros.rosenv import pick_domain_id, release_domain_id  # noqa: E402
 
 
 @pytest.fixture
@@ -33,9 +33,12 @@ def ros_context(monkeypatch: pytest.MonkeyPatch) -> Iterator[Context]:
     domain = int(forced) if forced else pick_domain_id()
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    yield context
-    rclpy.try_shutdown(context=context)
+    try:
+        rclpy.init(context=context, domain_id=domain)
+        yield context
+        rclpy.try_shutdown(context=context)
+    finally:
+        release_domain_id(domain)  # held from the pick: no concurrent suite takes it meanwhile
 
 
 class Spinner:

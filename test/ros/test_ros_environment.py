@@ -14,7 +14,8 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from transparency_ros.rosenv import DOMAIN_MAX, DOMAIN_MIN  # noqa: E402
+from transparency_ros import rosenv  # noqa: E402
+from transparency_ros.rosenv import DOMAIN_MAX, DOMAIN_MIN, domain_ports  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -59,3 +60,19 @@ def test_each_test_context_is_on_a_domain_of_its_own_named_for_its_processes(
     assert DOMAIN_MIN <= domain <= DOMAIN_MAX
     # processes the test starts with os.environ join the same domain
     assert int(os.environ["ROS_DOMAIN_ID"]) == domain
+
+
+def test_a_participant_on_loopback_binds_ports_of_its_domain_that_the_pick_sees(
+    ros_context: Context,
+) -> None:
+    """What makes a domain taken for :func:`pick_domain_id`: confined to loopback, Fast DDS
+    binds unicast ports of the domain's range (7410 + 250 d and up), not its multicast
+    discovery port 7400 + 250 d, which the pick once looked at alone."""
+    domain = ros_context.get_domain_id()
+    node = Node("port_probe", context=ros_context)
+    try:
+        bound = rosenv._bound_udp_ports() & set(domain_ports(domain))
+        assert bound, f"no UDP port of domain {domain} bound by a live participant"
+        assert domain_ports(domain).start not in bound
+    finally:
+        node.destroy_node()

@@ -49,7 +49,7 @@ from transparency_ros.ros.harness import (
     stop_node,
 )
 from transparency_ros.ros.services import ServiceCaller, wait_until
-from transparency_ros.rosenv import pick_domain_id
+from transparency_ros.rosenv import pick_domain_id, release_domain_id
 
 MAX_SETTLE_REVOLUTIONS = 20
 # e_s is a maximum over a smooth revolution: a few hundred samples find it; fewer means the
@@ -134,6 +134,7 @@ def run_cell(
     finally:
         for name, proc in procs.items():
             logs[name] = stop_node(proc)
+        release_domain_id(domain)
         tail = driver_left_motor_enabled(logs.get("actuator_driver", ""))
         if tail:
             raise FeelCageRunError(f"actuator_driver did not report a disabled motor:\n{tail}")

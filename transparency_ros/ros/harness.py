@@ -24,7 +24,10 @@ from rclpy.executors import ExternalShutdownException, ShutdownException, Single
 from rclpy.node import Node
 from rclpy.utilities import try_shutdown
 
-from transparency_ros.rosenv import local_ros_env
+from transparency_ros.rosenv import local_ros_env, release_domain_id
+
+# the domain start_node picked for a process, released when stop_node has stopped it
+_picked_for: dict[int, int] = {}
 
 
 def start_node(
@@ -37,21 +40,30 @@ def start_node(
 ) -> subprocess.Popen[str]:
     """Start a node of this package as a process; its output is captured (stdout and stderr).
 
-    Without ``domain_id`` a free domain is picked; pass one to put several nodes on the same
-    domain. This process joins it (for a :class:`Listener` created afterwards)."""
+    Without ``domain_id`` a free domain is picked, held until :func:`stop_node` stops the
+    process; pass one to put several nodes on the same domain (the caller holds it). This
+    process joins it (for a :class:`Listener` created afterwards)."""
     env = local_ros_env(domain_id=domain_id)
     os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
     args = [str(Path(sys.executable).parent / executable), "--ros-args"]
     for name, value in parameters.items():
         args += ["-p", f"{name}:={value}"]
     args += list(extra)
-    return subprocess.Popen(
-        args,
-        env=env,
-        stdout=subprocess.DEVNULL if quiet else subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
+    try:
+        proc = subprocess.Popen(
+            args,
+            env=env,
+            stdout=subprocess.DEVNULL if quiet else subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+    except BaseException:
+        if domain_id is None:
+            release_domain_id(int(env["ROS_DOMAIN_ID"]))
+        raise
+    if domain_id is None:
+        _picked_for[proc.pid] = int(env["ROS_DOMAIN_ID"])
+    return proc
 
 
 def stop_node(proc: subprocess.Popen[str], timeout_s: float = 10.0) -> str:
@@ -63,6 +75,9 @@ def stop_node(proc: subprocess.Popen[str], timeout_s: float = 10.0) -> str:
     except subprocess.TimeoutExpired:
         proc.kill()
         output, _ = proc.communicate()
+    domain = _picked_for.pop(proc.pid, None)
+    if domain is not None:
+        release_domain_id(domain)
     return output or ""
 
 

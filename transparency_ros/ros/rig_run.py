@@ -48,7 +48,7 @@ from transparency_ros.ros.harness import (
 )
 from transparency_ros.ros.recorder import Recorder
 from transparency_ros.ros.services import ServiceCaller
-from transparency_ros.rosenv import pick_domain_id
+from transparency_ros.rosenv import pick_domain_id, release_domain_id
 
 RECORDED = {
     "/joint_states": JointState,
@@ -205,6 +205,7 @@ def run_rig(
                     bags.append(trial_bag)
     finally:
         logs = {name: stop_node(proc) for name, proc in procs.items()}
+        release_domain_id(domain)
         tail = driver_left_motor_enabled(logs.get("actuator_driver", ""))
         if tail:
             raise RigRunError(f"actuator_driver did not report a disabled motor:\n{tail}")
