@@ -34,10 +34,13 @@ ALL = range(DOMAIN_MIN, DOMAIN_MAX + 1)
 
 
 def _holder(lock_dir: Path, count: int) -> subprocess.Popen[str]:
-    """Another process that picks ``count`` domains, prints them and holds them until stdin ends."""
+    """Another process that picks ``count`` domains, prints them and holds them until stdin ends
+    (the locks alone decide there too: ROS processes of this machine bind ports meanwhile)."""
     code = textwrap.dedent(f"""
         import sys
+        from transparency_ros import rosenv
         from transparency_ros.rosenv import pick_domain_id
+        rosenv._bound_udp_ports = set
         print(*(pick_domain_id(lock_dir={str(lock_dir)!r}) for _ in range({count})), flush=True)
         sys.stdin.read()
     """)
