@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -66,6 +66,15 @@ class DropEffect:
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {}
+
+
+class GiveWay(NamedTuple):
+    """What a drift's Coulomb part may stand for (``DropDrift.gives_way``)."""
+
+    kept: DropDrift | None  # the drift of its other terms that drifted (None: none did)
+    start: FloatArray  # their values
+    taker: str  # the candidate that may take the Coulomb part
+    whole: bool  # the Coulomb torque fitted to nothing (else: off nominal beside another term)
 
 
 class DropDrift(DropEffect):
@@ -129,23 +138,33 @@ class DropDrift(DropEffect):
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {n: 1.0 for n, f in zip(self.TERMS, self.free, strict=True) if not f}
 
-    def gives_way(self, p: FloatArray) -> tuple[DropDrift | None, FloatArray, str] | None:
-        """Where its Coulomb scale is fitted to nothing (within ``BOUND_SHARE`` of its range
-        of 0, as ``pinned`` reads a bound): the drift with its other terms that drifted (None
-        where none did), their values, and the effect that takes the Coulomb part's place, an
-        offset (``revisit.friction_given_away``). The fit would have gone below no friction if it
-        could: it wants a torque along the motion, which no friction gives and an offset is
-        (zoo_11801: an inertia x1.88 and an offset of 0.076 N m named as a drift of the
-        inertia x1.90 with no Coulomb torque at all). None where the Coulomb term is not free
-        or not at zero."""
+    def gives_way(self, p: FloatArray) -> GiveWay | None:
+        """What its Coulomb part may stand for (``revisit.friction_given_away``): the drift with
+        its other terms that drifted (None where none did), their values, and the effect that
+        may take the Coulomb part's place, an offset; None where the Coulomb term is not free
+        or neither case holds:
+
+        * ``whole``: the Coulomb scale fitted to nothing (within ``BOUND_SHARE`` of its range
+          of 0, as ``pinned`` reads a bound). The fit would have gone below no friction if it
+          could: it wants a torque along the motion, which no friction gives and an offset is
+          (zoo_11801: an inertia x1.88 and an offset of 0.076 N m named as a drift of the
+          inertia x1.90 with no Coulomb torque at all).
+        * not ``whole``: the Coulomb scale drifted beside another term that drifted. Where the
+          arm turns one way, a Coulomb torque off its nominal value is a constant torque, as
+          an offset is: the search, which names the offset where the two are alike alone
+          (``yields_to``), never compared them where the Coulomb part came with another term
+          (zoo_12193: a viscous drift x0.60 and an offset of -0.064 N m named as a drift of the
+          viscous term x0.60 and the Coulomb torque x2.91)."""
         s = self.scales(p)
-        if not self.free[2] or s[2] > BOUND_SHARE * self.UPPER:  # (its range: 0 to UPPER)
+        if not self.free[2]:
             return None
         moved = drifted_terms(s) & np.array(self.free)
-        moved[2] = False  # (the Coulomb term)
-        if not moved.any():
-            return None, np.empty(0), "torque_offset"
-        return DropDrift((bool(moved[0]), bool(moved[1]), False)), s[moved], "torque_offset"
+        coulomb_moved, moved[2] = bool(moved[2]), False
+        whole = bool(s[2] <= BOUND_SHARE * self.UPPER)  # (its range: 0 to UPPER)
+        if not whole and not (coulomb_moved and moved.any()):
+            return None
+        kept = DropDrift((bool(moved[0]), bool(moved[1]), False)) if moved.any() else None
+        return GiveWay(kept, s[moved], "torque_offset", whole)
 
     def reduced(self, p: FloatArray) -> tuple[DropDrift, FloatArray] | None:
         """The drift with its terms that did not drift (within ``DRIFT_MIN`` of nominal) held,

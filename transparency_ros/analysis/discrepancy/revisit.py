@@ -10,8 +10,9 @@ decisions are taken again on the model the search ended with:
   that named it (``Discoverer._names``): one that no longer names is dropped;
 * :func:`variants_again`: a named effect against its variants that hold some of its
   parameters (a band with the arm on its far flank against one whose start is fitted);
-* :func:`friction_given_away`: a drift fitted with no Coulomb torque at all, tried as the drift
-  of its other terms and an offset.
+* :func:`friction_given_away`: a drift fitted with no Coulomb torque at all, or with its
+  Coulomb torque off nominal beside another term, tried as the drift of its other terms and
+  an offset.
 """
 
 from __future__ import annotations
@@ -217,24 +218,32 @@ def friction_given_away(
     params: list[FloatArray],
     floor: float,
 ) -> tuple[list[Any], list[FloatArray]]:
-    """A named effect whose fit ``gives_way`` (a drift whose Coulomb torque is fitted to
-    nothing: the fit wants a torque along the motion, which no friction gives), tried on the
-    model the search ended with as what it gives way to: the drift of its other terms (or
-    none) and the effect that takes the Coulomb part (an offset), that one fitted with all
-    the others. Taken, with a note, where the model then explains the held-out recordings
-    alike (``ALIKE``: with no more parameters, where ``steps.choose`` takes the simpler of
-    two alike), the taker is meaningful, its interval excludes its null and it is the torque
-    the zero friction stood for (``takes_friction``: an offset at least the model's Coulomb
-    torque); otherwise the drift stays. Where the taker is named already, the Coulomb part
-    is given to it: the drift held to its other terms and every parameter refitted, taken
-    where alike (zoo_11839: an offset of -0.029 N m named beside an inertia drift with no
-    Coulomb torque, -0.063 hidden). Where the arm turns one way through its recordings, the
-    two are the same torque; where it turns back or comes to rest, the fit tells them apart.
-    On the final model, not in the search: there a Coulomb torque of nothing also stands in
-    for an effect found later (zoo_11463: for a hub spring; an offset named in its place
-    stayed named at -0.001 N m). On zoo_11463's final model the offset fitted in its place
-    is 0.23 of the Coulomb torque (refused); on zoo_11801 and zoo_11829, each hiding an
-    offset beside a drift, 2.3 and 3.5 times it."""
+    """A named effect whose fit ``gives_way``, tried on the model the search ended with as
+    what it gives way to: the drift of its other terms (or none) and the effect that takes
+    the Coulomb part (an offset), that one fitted with all the others. Two cases:
+
+    * a drift whose Coulomb torque is fitted to nothing (the fit wants a torque along the
+      motion, which no friction gives): the taker must be the torque the zero friction stood
+      for (``takes_friction``: an offset at least the model's Coulomb torque);
+    * a drift whose Coulomb torque is off nominal beside another term that drifted, its 95 %
+      interval without the nominal value: where the arm turns one way the two are the same
+      torque, and the search compared an offset with a Coulomb drift alone (``yields_to``),
+      not with the Coulomb part of a drift of several terms (zoo_12193, zoo_12133: a viscous
+      drift and an offset named as a viscous drift with the Coulomb torque x2.9 and x3.3).
+
+    Taken, with a note, where the model then explains the held-out recordings alike
+    (``ALIKE``: with no more parameters, where ``steps.choose`` takes the simpler of two
+    alike), the taker is meaningful and its interval excludes its null; otherwise the drift
+    stays. Where the taker is named already, the Coulomb part is given to it: the drift held
+    to its other terms and every parameter refitted, taken where alike (zoo_11839: an offset
+    of -0.029 N m named beside an inertia drift with no Coulomb torque, -0.063 hidden).
+    Where the arm turns one way through its recordings, the two are the same torque; where
+    it turns back or comes to rest, the fit tells them apart. On the final model, not in the
+    search: there a Coulomb torque of nothing also stands in for an effect found later
+    (zoo_11463: for a hub spring; an offset named in its place stayed named at -0.001 N m).
+    On zoo_11463's final model the offset fitted in its place is 0.23 of the Coulomb torque
+    (refused); on zoo_11801 and zoo_11829, each hiding an offset beside a drift, 2.3 and 3.5
+    times it."""
     hit = next(
         (
             (i, way)
@@ -246,8 +255,13 @@ def friction_given_away(
     taker = None if hit is None else _candidate(loop, hit[1][2])
     if hit is None or taker is None:
         return effects, params
-    i, (kept, start, _) = hit
+    i, (kept, start, _, whole) = hit
     problem, drift, finding = loop.problem, effects[i], report.findings[i]
+    if not whole:  # the Coulomb part told from its nominal value, or nothing to give
+        lo, hi = finding.confidence_interval.get("coulomb_scale", (1.0, 1.0))
+        if lo <= 1.0 <= hi:
+            return effects, params
+    coulomb = finding.parameters.get("coulomb_scale", float("nan"))
     before = rmse(problem.error(effects, params, True))
     # the drift held to the terms that drifted, in its place (or gone where none did)
     instead = [] if kept is None else [kept]
@@ -278,17 +292,18 @@ def friction_given_away(
             step.rmse <= ALIKE * before
             and step.meaningful
             and not null_inside(step)
-            and getattr(taker, "takes_friction", lambda _p: True)(step.params[-1])
+            and (not whole or getattr(taker, "takes_friction", lambda _p: True)(step.params[-1]))
         ):
             return effects, params
         findings.append(loop._finding(taker, step, base, base.rmse, step.rmse))
         new_effects, new_params, after = [*held, taker], step.params, step.rmse
         result = step.result if step.joint else None
     unit = getattr(problem, "unit", "rad")
-    loop.progress(f"{drift.name} with no Coulomb torque gives way to {taker.name}")
+    fitted = "no Coulomb torque" if whole else f"its Coulomb torque x{coulomb:.3g}"
+    loop.progress(f"{drift.name} with {fitted} gives way to {taker.name}")
     report.findings = findings
     report.notes.append(
-        f"{drift.name} fitted with no Coulomb torque ({before:.4g} {unit} held-out RMSE) explains"
+        f"{drift.name} fitted with {fitted} ({before:.4g} {unit} held-out RMSE) explains"
         f" the recordings as {taker.name}"
         + ("" if kept is None else f" beside the drift of {', '.join(kept.param_names)}")
         + f" does ({after:.4g} {unit}): named so, the Coulomb torque at its nominal value"
