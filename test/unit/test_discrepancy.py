@@ -416,3 +416,32 @@ def test_a_wave_whose_period_stands_out_of_the_scan_is_judged_by_its_prominence(
     assert loop._share(step(0.1, 2.0, 10.0, spread=alike + 0.1)) == 0.75
     assert loop._share(step(0.1, 2.0, 10.0)) == 0.75
     assert loop._share(step(0.1, 2.0, 10.0, added=2, spread=0.0)) == 0.75
+
+
+def test_a_phase_above_the_leftover_is_unexplained_where_the_whole_residual_is_not() -> None:
+    """What the report calls unexplained, and what opens the search to pairs (zoo_12167: a
+    delay and an offset left 2.8x the noise floor in all, 7x at the impact): a phase of 50
+    held-out elements at least whose RMS is above LEFTOVER times the floor."""
+    from transparency_ros.analysis.discrepancy.findings import (  # noqa: PLC0415
+        LEFTOVER,
+        MIN_PHASE,
+        unexplained_phases,
+    )
+
+    n = 1000
+    impact = np.zeros(n, dtype=bool)
+    impact[:100] = True
+    short = np.zeros(n, dtype=bool)
+    short[100 : 100 + MIN_PHASE - 1] = True
+    problem = SimpleNamespace(
+        noise_floor=lambda: 1.0,
+        phases=lambda: {"impact": impact, "short": short, "rest": ~(impact | short)},
+    )
+    err = np.ones(n)
+    err[impact] = 7.0
+    err[short] = 50.0  # too few elements to judge
+    assert float(np.sqrt(np.mean(err[~short] ** 2))) < LEFTOVER  # the whole is below
+    found = unexplained_phases(problem, err)  # type: ignore[arg-type]
+    assert found == {"impact": pytest.approx(7.0)}
+    err[impact] = 0.99 * LEFTOVER
+    assert unexplained_phases(problem, err) == {}  # type: ignore[arg-type]

@@ -14,8 +14,8 @@ cause; for an effect of one sensor's readings, of that sensor's error above its 
 least a tenth of the floor in absolute terms, the held-out information criterion
 (n log(RSS/n) + 2k) improves by more than 10, and its fit is meaningful (a wave whose period
 stands out of its scan is named without the share: ``PROMINENT_WAVE``). When no single
-candidate passes and structure is left, candidates are fitted two at a time (two missing
-effects may each explain too little alone). A kept effect gets its parameters with 95 %
+candidate passes and a phase is left unexplained, candidates are fitted two at a time (two
+missing effects may each explain too little alone). A kept effect gets its parameters with 95 %
 confidence intervals (from the fit's Jacobian), where it acted (the motion phase whose residual
 it reduced most, and the trial and time window of the largest reduction) and the evidence.
 Effects whose size the recording declares (the shuttle's weight: ``declared``) are not searched
@@ -26,10 +26,10 @@ problem with a second channel (``force_view``: a drop test's load cell while the
 the arm) has the candidates not named searched once more there, the effects found held. What
 is left after the search (decisions taken again on the final model first, ``revisit``: a
 shown effect against its rival, each searched effect tried again without it, an effect
-against its variants of fewer parameters, a drift with no Coulomb torque) is checked for
-structure (phase RMS against the noise floor, its dominant frequency, how much of it the state
-explains, the closest candidate) and reported as ``unexplained``, never forced onto a label.
-"""
+against its variants of fewer parameters, a drift's Coulomb part against an offset) is checked
+for structure (phase RMS against the noise floor, its dominant frequency, how much of it the
+state explains, the closest candidate) and reported as ``unexplained``, never forced onto a
+label."""
 
 from __future__ import annotations
 
@@ -39,10 +39,10 @@ from typing import Any
 
 from transparency_ros.analysis.discrepancy.effects import Effect
 from transparency_ros.analysis.discrepancy.findings import (
-    LEFTOVER,
     Report,
     finding,
     leftover,
+    unexplained_phases,
     update_findings,
     widen,
 )
@@ -176,6 +176,7 @@ class Discoverer:
         declared = getattr(problem, "declared_stage", True)
         closest: Step | None = None
         left = getattr(problem, "structure_left", lambda e: rmse(e) > SIGNIFICANT * floor)
+        pairs = getattr(problem, "pairs", True)
         while remaining and left(held_err):
             base = Base(
                 held_err, rmse(held_err), aic(held_err, total(params)), floor, effects, params
@@ -187,10 +188,10 @@ class Discoverer:
                 step = self._choose(
                     [s for s in self._with_declared(effects, singles, base) if self._names(s, base)]
                 )
-            if step is None and base.rmse > LEFTOVER * floor and getattr(problem, "pairs", True):
-                # structure is left that no single effect explains: two missing effects may
-                # each explain too little alone (one stands in for the other). Not below: a
-                # pair fitted to what is nearly noise explains noise.
+            if step is None and pairs and unexplained_phases(problem, held_err):
+                # a phase unexplained (3x the floor; not below: a pair fitted to nearly noise
+                # explains noise) that no single effect explains: two missing effects may each
+                # explain too little alone (zoo_12167: 2.8x the floor in all, 7x at impact)
                 self.progress("no single effect explains it: trying pairs")
                 step = self._choose(
                     [s for s in self._pairs(effects, params, singles, base) if self._names(s, base)]
@@ -569,9 +570,8 @@ class Discoverer:
                 alone=[first.new()[0][1], second.new()[0][1]],
             )  # fmt: skip
             # nothing fitted before the pair (the declared weight has nothing to fit): its own
-            # fit is the joint one. A refit of it could only return 'no better', and the pair
-            # was then named without intervals (zoo 30 and 1074: point intervals on widths
-            # within 1 % of the truth)
+            # fit is the joint one (a refit could only return 'no better': the pair was named
+            # without intervals, zoo 30 and 1074: point intervals on widths within 1 %)
             joint, result = (
                 (own, own_fit)
                 if not any(getattr(e, "fittable", True) for e in effects)

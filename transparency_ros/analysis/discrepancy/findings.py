@@ -18,6 +18,7 @@ from transparency_ros.analysis.discrepancy.problem import Problem
 
 STATE_EXPLAINED = 0.3  # below: the leftover torque is not a function of the state
 LEFTOVER = 3.0  # a phase whose residual is above 3x the noise floor is left unexplained
+MIN_PHASE = 50  # held-out elements a phase needs to be judged so
 
 
 @dataclass(frozen=True)
@@ -213,6 +214,20 @@ def derived_intervals(
     return out
 
 
+def unexplained_phases(problem: Problem, err: FloatArray) -> dict[str, float]:
+    """The motion phases (``MIN_PHASE`` held-out elements at least) whose residual RMS is above
+    ``LEFTOVER`` times the noise floor, with that RMS: what a report leaves unexplained."""
+    floor = problem.noise_floor()
+    out = {}
+    for name, mask in problem.phases().items():
+        if mask.sum() < MIN_PHASE:
+            continue
+        rms = float(np.sqrt(np.mean(err[mask] ** 2)))
+        if rms > LEFTOVER * floor:
+            out[name] = rms
+    return out
+
+
 def leftover(
     problem: Problem,
     err: FloatArray,
@@ -227,45 +242,41 @@ def leftover(
     out = []
     peak: float | None = None
     explained: float | None = None
-    for name, mask in problem.phases().items():
-        if mask.sum() < 50:
-            continue
-        rms = float(np.sqrt(np.mean(err[mask] ** 2)))
-        if rms > LEFTOVER * floor:
-            if peak is None:
-                peak = problem.residual_peak_hz(effects, params)
-                explained = getattr(problem, "state_explained", lambda *_: None)(effects, params)
-            entry: dict[str, Any] = {
-                "where": {"phase": name},
-                "rmse_rad": rms,
-                "noise_floor_rad": floor,
-                "dominant_frequency_hz": peak,
-                "looks_like": (
-                    f"residual {rms / floor:.0f}x the noise floor in phase '{name}'"
-                    if floor > 0
-                    else f"residual {rms:.2g} rad RMS in phase '{name}' (no noise floor: the "
-                    "recorded position never changes in the windows compared)"
+    for name, rms in unexplained_phases(problem, err).items():
+        if peak is None:
+            peak = problem.residual_peak_hz(effects, params)
+            explained = getattr(problem, "state_explained", lambda *_: None)(effects, params)
+        entry: dict[str, Any] = {
+            "where": {"phase": name},
+            "rmse_rad": rms,
+            "noise_floor_rad": floor,
+            "dominant_frequency_hz": peak,
+            "looks_like": (
+                f"residual {rms / floor:.0f}x the noise floor in phase '{name}'"
+                if floor > 0
+                else f"residual {rms:.2g} rad RMS in phase '{name}' (no noise floor: the "
+                "recorded position never changes in the windows compared)"
+            )
+            + (f"; the residual peaks near {peak:.1f} Hz" if not math.isnan(peak) else ""),
+        }
+        if closest is not None and closest[1] > 0:
+            names, gain = closest
+            entry["closest_candidate"] = {"effect": names, "share_removed": gain}
+            entry["looks_like"] += (
+                f"; the closest candidate, {names}, would remove {gain:.0%} of "
+                "it, too little to name"
+            )
+        if explained is not None:
+            entry["state_explained_fraction"] = explained
+            entry["looks_like"] += (
+                f"; position and velocity explain {max(explained, 0.0):.0%} of the "
+                "torque residual on held-out trials"
+                + (
+                    " (not a function of the state: an input the model does not see, "
+                    "such as a hand or a contact)"
+                    if explained < STATE_EXPLAINED
+                    else ""
                 )
-                + (f"; the residual peaks near {peak:.1f} Hz" if not math.isnan(peak) else ""),
-            }
-            if closest is not None and closest[1] > 0:
-                names, gain = closest
-                entry["closest_candidate"] = {"effect": names, "share_removed": gain}
-                entry["looks_like"] += (
-                    f"; the closest candidate, {names}, would remove {gain:.0%} of "
-                    "it, too little to name"
-                )
-            if explained is not None:
-                entry["state_explained_fraction"] = explained
-                entry["looks_like"] += (
-                    f"; position and velocity explain {max(explained, 0.0):.0%} of the "
-                    "torque residual on held-out trials"
-                    + (
-                        " (not a function of the state: an input the model does not see, "
-                        "such as a hand or a contact)"
-                        if explained < STATE_EXPLAINED
-                        else ""
-                    )
-                )
-            out.append(entry)
+            )
+        out.append(entry)
     return out
