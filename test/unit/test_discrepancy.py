@@ -22,7 +22,7 @@ from transparency_ros.analysis.discrepancy.effects import ParameterDrift, librar
 from transparency_ros.analysis.discrepancy.findings import Finding, Report, parameters_text, widen
 from transparency_ros.analysis.discrepancy.fitting import held_at
 from transparency_ros.analysis.discrepancy.model import Trial, load_nominal
-from transparency_ros.analysis.discrepancy.steps import Step, choose, null_inside
+from transparency_ros.analysis.discrepancy.steps import Base, Step, choose, null_inside
 from transparency_ros.core import strict_json
 from transparency_ros.core.errors import ConfigError
 from transparency_ros.synth.campaign import OUTSIDE, write_campaign
@@ -445,3 +445,31 @@ def test_a_phase_above_the_leftover_is_unexplained_where_the_whole_residual_is_n
     assert found == {"impact": pytest.approx(7.0)}
     err[impact] = 0.99 * LEFTOVER
     assert unexplained_phases(problem, err) == {}  # type: ignore[arg-type]
+
+
+def test_a_step_judged_on_an_error_at_its_floor_already_removes_no_share_of_it() -> None:
+    """A sensor's effect is judged on that sensor's error and floor. Where that error is at or
+    under its floor already, whatever the effect removes is noise: its share is 0, not the
+    removal over a vanishing denominator (zoo_12214: an encoder error of 0.279 mrad under its
+    floor of 0.443 after the lattice; a 0.25 ms sensor delay took 0.075 mrad off it, a share
+    of 7.5e7, and was named on a campaign hiding nothing)."""
+    n = 200
+    sensor = np.arange(n) < n // 2  # the encoder's half of the pooled held-out error
+    effect = SimpleNamespace(discrete_choices=0, meaningful=lambda _p: True)
+
+    def judged_share(before: float, after: float, floor: float) -> float:
+        base_err = np.where(sensor, before, 10.0)  # the pooled error far above its floor
+        err = np.where(sensor, after, 10.0)
+        problem = SimpleNamespace(
+            error=lambda _e, _p, _h: err, sensor_scope=lambda _a, _s: (sensor, floor)
+        )
+        loop = Discoverer.__new__(Discoverer)
+        loop.problem = problem
+        base = Base(base_err, 10.0, 0.0, 1.0)
+        step = loop._step([], [np.array([2.5e-4])], [effect], None, base)
+        assert step.judged == pytest.approx((before, after, floor))
+        return step.gain
+
+    assert judged_share(2.0e-3, 1.0e-3, 0.5e-3) == pytest.approx(2 / 3)  # above: its share
+    assert judged_share(0.279e-3, 0.204e-3, 0.443e-3) == 0.0  # under its floor: none
+    assert judged_share(0.443e-3, 0.3e-3, 0.443e-3) == 0.0  # at it

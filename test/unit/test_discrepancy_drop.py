@@ -441,9 +441,10 @@ def test_a_drift_with_no_coulomb_torque_gives_way_to_the_offset_it_stood_for(
         tmp_path, rotor_inertia_kgm2=1.8 * 2.27e-3, torque_offset_nm=offset_nm
     )
     drift, x = DropDrift(), np.array([1.8, 1.0, 0.0])
-    kept, start, taker, whole = drift.gives_way(x)  # type: ignore[misc]
-    assert isinstance(kept, DropDrift) and kept.free == (True, False, False)
-    assert start.tolist() == [1.8] and taker == "torque_offset" and whole
+    way = drift.gives_way(x)
+    assert way is not None and isinstance(way.kept, DropDrift)
+    assert way.kept.free == (True, False, False) and way.start.tolist() == [1.8]
+    assert way.taker == "torque_offset" and way.whole
     effects, params, report = _given_away(problem, [drift], [x])
     if offset_nm < 0.026:
         assert effects == [drift] and params[0] is x and len(report.findings) == 1
@@ -554,6 +555,9 @@ def test_a_drift_gives_way_where_its_coulomb_torque_is_nothing_or_moved_beside_a
     assert way is not None and not way.whole
     assert way.kept is not None and way.kept.free == (True, False, False)
     assert way.start.tolist() == [1.8]
+    # the part given away, by the name its finding reports it and its nominal value
+    assert way.term in DropDrift().param_names and way.term.startswith("coulomb")
+    assert way.null == DropDrift().null[DropDrift().param_names.index(way.term)]
     offset = DropOffset(0.026)
     assert offset.takes_friction(np.array([-0.03])) and not offset.takes_friction(np.array([0.02]))
 

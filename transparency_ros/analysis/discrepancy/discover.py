@@ -481,8 +481,8 @@ class Discoverer:
             err=err,
             rmse=err_rmse,
             aic=aic(err, size),
-            # the share of the error above the floor it removes (of one sensor's: _judged)
-            gain=float((before - after) / max(before - floor, 1e-12)),
+            # the share of the error above the floor it removes (_judged says whose; none at it)
+            gain=float((before - after) / (before - floor)) if before > floor else 0.0,
             judged=judged,
             scanned=scan_facts(self.problem, effects, added, params),
             result=result,

@@ -255,13 +255,13 @@ def friction_given_away(
     taker = None if hit is None else _candidate(loop, hit[1][2])
     if hit is None or taker is None:
         return effects, params
-    i, (kept, start, _, whole) = hit
+    i, (kept, start, _, whole, term, null) = hit
     problem, drift, finding = loop.problem, effects[i], report.findings[i]
     if not whole:  # the Coulomb part told from its nominal value, or nothing to give
-        lo, hi = finding.confidence_interval.get("coulomb_scale", (1.0, 1.0))
-        if lo <= 1.0 <= hi:
+        lo, hi = finding.confidence_interval.get(term, (null, null))
+        if lo <= null <= hi:
             return effects, params
-    coulomb = finding.parameters.get("coulomb_scale", float("nan"))
+    coulomb = finding.parameters.get(term, float("nan"))
     before = rmse(problem.error(effects, params, True))
     # the drift held to the terms that drifted, in its place (or gone where none did)
     instead = [] if kept is None else [kept]
