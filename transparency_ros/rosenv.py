@@ -33,7 +33,7 @@ DOMAIN_MIN, DOMAIN_MAX = 1, 100
 _PORT_BASE, _DOMAIN_GAIN = 7400, 250
 LOCK_DIR = os.path.join(tempfile.gettempdir(), f"transparency_ros-{os.getuid()}-domains")
 
-_held: dict[int, int] = {}  # domain -> the file descriptor holding its lock
+_held: dict[int, int] = {}  # domain -> the file descriptor holding its lock (-1: no lock made)
 
 
 class NoFreeDomainError(RuntimeError):
@@ -94,19 +94,19 @@ def pick_domain_id(rng: random.Random | None = None, *, lock_dir: str | None = N
         fd = _lock(domain, lock_dir)
         if fd is None:
             continue
-        if fd >= 0:
-            _held[domain] = fd
+        _held[domain] = fd  # (-1: not locked, still never picked twice by this process)
         return domain
     raise NoFreeDomainError(
         f"no free ROS domain in {DOMAIN_MIN}..{DOMAIN_MAX} on this machine (UDP ports of each "
-        f"bound, or its lock in {lock_dir} held): stop other ROS processes, or set ROS_DOMAIN_ID"
+        f"bound, or its lock in {lock_dir} held): stop other ROS processes, or give one yourself "
+        "(ROS_DOMAIN_ID; for the test suite TRANSPARENCY_TEST_DOMAIN_ID)"
     )
 
 
 def release_domain_id(domain: int) -> None:
     """Let other processes pick ``domain`` again (a domain this process does not hold: no-op)."""
     fd = _held.pop(domain, None)
-    if fd is not None:
+    if fd is not None and fd >= 0:
         os.close(fd)  # closing the last descriptor drops the flock
 
 

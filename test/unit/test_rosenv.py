@@ -129,6 +129,29 @@ def test_a_released_domain_can_be_picked_by_another_process(
     assert not set(mine) & set(held_domain_ids())
 
 
+def test_where_no_lock_can_be_made_a_pick_is_still_held_by_this_process(
+    tmp_path: Path, no_ports_bound: None, already_held: set[int]
+) -> None:
+    """A lock directory that cannot be made (here under a plain file; a read-only temp
+    directory alike): the port check alone keeps other processes off, and this process still
+    never picks one domain twice until it lets it go."""
+    (tmp_path / "a_file").write_text("")
+    nowhere = str(tmp_path / "a_file" / "domains")
+    mine: list[int] = []
+    try:
+        while len(mine) + len(already_held) < len(ALL):
+            mine.append(pick_domain_id(lock_dir=nowhere))
+        assert len(set(mine)) == len(mine) and not set(mine) & already_held
+        with pytest.raises(NoFreeDomainError, match="TRANSPARENCY_TEST_DOMAIN_ID"):
+            pick_domain_id(lock_dir=nowhere)
+        release_domain_id(mine[0])
+        assert pick_domain_id(lock_dir=nowhere) == mine[0]
+    finally:
+        for domain in mine:
+            release_domain_id(domain)
+    assert not set(mine) & set(held_domain_ids())
+
+
 def test_processes_picking_at_once_get_different_domains(
     tmp_path: Path, no_ports_bound: None
 ) -> None:
