@@ -534,7 +534,7 @@ def test_a_coulomb_part_moved_beside_another_drifted_term_gives_way_to_the_offse
     assert kept[0] == [drift] and report.notes == []
 
 
-def test_a_drift_gives_way_where_its_coulomb_torque_is_nothing_or_moved_beside_another_term(
+def test_a_drift_gives_way_where_its_coulomb_torque_is_nothing_or_moved_in_a_drift_of_more_terms(
 ) -> None:  # fmt: skip
     from transparency_ros.analysis.discrepancy.drop_effects import (  # noqa: PLC0415
         DropDrift,
@@ -543,7 +543,11 @@ def test_a_drift_gives_way_where_its_coulomb_torque_is_nothing_or_moved_beside_a
 
     assert DropDrift((True, True, False)).gives_way(np.array([1.8, 1.0])) is None
     assert DropDrift().gives_way(np.array([1.8, 1.0, 1.1])) is None  # Coulomb at nominal
-    assert DropDrift().gives_way(np.array([1.1, 0.9, 1.6])) is None  # a Coulomb drift alone
+    assert DropDrift((False, False, True)).gives_way(np.array([1.6])) is None  # decided: yields_to
+    # the Coulomb torque moved, the other terms free but back at nominal: the offset alone
+    way = DropDrift().gives_way(np.array([1.1, 0.9, 1.6]))
+    assert way is not None and not way.whole and way.kept is None and way.start.size == 0
+    assert DropDrift((True, False, True)).gives_way(np.array([0.96, 1.33])) is not None
     way = DropDrift().gives_way(np.array([1.02, 0.9, 0.01]))
     assert way is not None and way.whole
     assert way.kept is None and way.start.size == 0  # nothing else drifted: the offset alone

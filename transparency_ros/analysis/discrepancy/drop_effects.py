@@ -151,19 +151,22 @@ class DropDrift(DropEffect):
           could: it wants a torque along the motion, which no friction gives and an offset is
           (zoo_11801: an inertia x1.88 and an offset of 0.076 N m named as a drift of the
           inertia x1.90 with no Coulomb torque at all).
-        * not ``whole``: the Coulomb scale drifted beside another term that drifted. Where the
+        * not ``whole``: the Coulomb scale drifted in a drift of more terms than it. Where the
           arm turns one way, a Coulomb torque off its nominal value is a constant torque, as
           an offset is: the search, which names the offset where the two are alike alone
           (``yields_to``), never compared them where the Coulomb part came with another term
           (zoo_12193: a viscous drift x0.60 and an offset of -0.064 N m named as a drift of the
-          viscous term x0.60 and the Coulomb torque x2.91)."""
+          viscous term x0.60 and the Coulomb torque x2.91), nor where the other terms, free,
+          came back to nominal once later effects were fitted beside them (zoo_12278: an
+          offset beside a sensor delay named as a drift of the inertia, x1.29 before the delay
+          was found and x0.96 after, and of the Coulomb torque, x1.33)."""
         s = self.scales(p)
         if not self.free[2]:
             return None
         moved = drifted_terms(s) & np.array(self.free)
         coulomb_moved, moved[2] = bool(moved[2]), False
         whole = bool(s[2] <= BOUND_SHARE * self.UPPER)  # (its range: 0 to UPPER)
-        if not whole and not (coulomb_moved and moved.any()):
+        if not whole and not (coulomb_moved and any(self.free[:2])):
             return None
         kept = DropDrift((bool(moved[0]), bool(moved[1]), False)) if moved.any() else None
         return GiveWay(kept, s[moved], "torque_offset", whole, self.TERMS[2], 1.0)
