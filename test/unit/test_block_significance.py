@@ -24,7 +24,9 @@ class _Problem:
         self.held_runs = [SimpleNamespace(t=np.zeros(samples))]
         self.scope = scope
 
-    def sensor_scope(self, added: list[Any], after: bool) -> tuple[np.ndarray, float] | None:
+    def sensor_scope(
+        self, added: list[Any], after: bool, modelled: Any = ()
+    ) -> tuple[np.ndarray, float] | None:
         if self.scope is None:
             return None
         return np.isin(np.tile(np.arange(2), self.held_runs[0].t.size), self.scope), 1.0

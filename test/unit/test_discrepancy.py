@@ -461,7 +461,7 @@ def test_a_step_judged_on_an_error_at_its_floor_already_removes_no_share_of_it()
         base_err = np.where(sensor, before, 10.0)  # the pooled error far above its floor
         err = np.where(sensor, after, 10.0)
         problem = SimpleNamespace(
-            error=lambda _e, _p, _h: err, sensor_scope=lambda _a, _s: (sensor, floor)
+            error=lambda _e, _p, _h: err, sensor_scope=lambda _a, _s, _m: (sensor, floor)
         )
         loop = Discoverer.__new__(Discoverer)
         loop.problem = problem

@@ -1020,3 +1020,29 @@ def test_the_simulations_shortcuts_change_no_value_a_trial_is_compared_on(tmp_pa
             # (a trial that ends at rest: the fixed point was taken for it)
             at_rest += bool(np.all(q_full[i, n - 50 : n] == q_full[i, n - 1]))
     assert at_rest > 0
+
+
+def test_once_the_lattice_is_modelled_an_encoder_effect_is_judged_against_its_noise_at_rest(
+    tmp_path: Path,
+) -> None:
+    """An effect of the encoder's readings alone is judged on the encoder's error against
+    that encoder's floor: a count / sqrt 12 where the model reads the arm exactly, its noise at
+    rest once the lattice is in the model (the model then makes the readings' steps itself).
+    Against count / sqrt 12 a 1.3 ms delay on a 1024-count encoder, which took the encoder's
+    error from 1.67 to 0.38 mrad after the lattice, was judged on an error under its floor and
+    removed no share of it (zoo_12260)."""
+    from transparency_ros.analysis.discrepancy.drop_effects import (  # noqa: PLC0415
+        DropQuantization,
+        SensorDelay,
+    )
+
+    problem = _problem(write_drop_campaign(tmp_path / "c", 1, hidden=[], actuator="T2822"))
+    delay = SensorDelay(1e-3)
+    lattice = DropQuantization()
+    assert problem._encoder_floor > problem._sensor_noise[0]  # (count / sqrt 12 the larger)
+    mask, floor = problem.sensor_scope([delay]) or (None, None)
+    assert mask is not None and floor == problem._encoder_floor
+    scoped, floor = problem.sensor_scope([delay], False, [lattice]) or (None, None)
+    assert scoped is mask and floor == problem._sensor_noise[0]
+    # not the encoder's alone: judged on all of the error, whatever is modelled
+    assert problem.sensor_scope([delay, DropBacklash()], False, [lattice]) is None

@@ -498,11 +498,11 @@ class Discoverer:
         self, added: list[Any], base: Base, err: FloatArray, after_search: bool = False
     ) -> tuple[float, float, float]:
         """(RMSE before, after, floor) of the held-out error ``added`` is judged on: all of
-        it; for effects of one sensor's readings (``sensor_scope`` of the problem), and when
-        only one sensor's error is left above its floor (``leftover_scope``), that sensor's
-        error and its own floor (after the search, for ``checked_last``: the floor without
-        what they would explain)."""
-        scope = getattr(self.problem, "sensor_scope", lambda _a, _s: None)(added, after_search)
+        it; for effects of one sensor's readings (``sensor_scope`` of the problem, which knows
+        the effects found), or where only one sensor's error is left above its floor
+        (``leftover_scope``), that sensor's error and its own floor."""
+        scoped = getattr(self.problem, "sensor_scope", lambda *_a: None)
+        scope = scoped(added, after_search, base.effects)
         if scope is None and base.rmse <= SIGNIFICANT * base.floor:
             # the pooled error is near its floor: what is left is one sensor's, judged there
             scope = getattr(self.problem, "leftover_scope", lambda _e: None)(base.err)

@@ -166,7 +166,12 @@ class ForceView:
     def leftover_scope(self, err: FloatArray) -> None:
         return None
 
-    def sensor_scope(self, effects: Sequence[DropEffect], after_search: bool = False) -> None:
+    def sensor_scope(
+        self,
+        effects: Sequence[DropEffect],
+        after_search: bool = False,
+        modelled: Sequence[DropEffect] = (),
+    ) -> None:
         return None
 
     def accepts(self, effects: Sequence[DropEffect], params: Sequence[FloatArray]) -> bool:

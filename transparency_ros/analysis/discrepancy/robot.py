@@ -364,7 +364,7 @@ class RobotProblem:
         return 1.0
 
     def sensor_scope(
-        self, effects: Sequence[Any], after_search: bool = False
+        self, effects: Sequence[Any], after_search: bool = False, modelled: Sequence[Any] = ()
     ) -> tuple[npt.NDArray[np.bool_], float] | None:
         """The held-out elements of the joints ``effects`` act on, on which they are judged:
         a joint's own effect (its gain, friction, offset) changes its own row of the balance
