@@ -447,12 +447,14 @@ def test_a_phase_above_the_leftover_is_unexplained_where_the_whole_residual_is_n
     assert unexplained_phases(problem, err) == {}  # type: ignore[arg-type]
 
 
-def test_a_step_judged_on_an_error_at_its_floor_already_removes_no_share_of_it() -> None:
-    """A sensor's effect is judged on that sensor's error and floor. Where that error is at or
-    under its floor already, whatever the effect removes is noise: its share is 0, not the
+def test_a_step_judged_on_an_error_at_its_floor_already_removes_a_share_of_all_of_it() -> None:
+    """A sensor's effect is judged on that sensor's error and floor: the share of the error
+    above the floor it removes. Where that error is at or under its floor already, the floor
+    is no floor (an estimate the step went below) and the share is of all of it, not the
     removal over a vanishing denominator (zoo_12214: an encoder error of 0.279 mrad under its
-    floor of 0.443 after the lattice; a 0.25 ms sensor delay took 0.075 mrad off it, a share
-    of 7.5e7, and was named on a campaign hiding nothing)."""
+    floor of 0.443; a 0.25 ms sensor delay took 0.075 mrad off it, a share of 7.5e7, and was
+    named on a campaign hiding nothing; robot zoo 928: a 6 ms delay took a joint's error from
+    0.93 to 0.35 of its floor, a share of all of it of 0.62)."""
     n = 200
     sensor = np.arange(n) < n // 2  # the encoder's half of the pooled held-out error
     effect = SimpleNamespace(discrete_choices=0, meaningful=lambda _p: True)
@@ -471,5 +473,7 @@ def test_a_step_judged_on_an_error_at_its_floor_already_removes_no_share_of_it()
         return step.gain
 
     assert judged_share(2.0e-3, 1.0e-3, 0.5e-3) == pytest.approx(2 / 3)  # above: its share
-    assert judged_share(0.279e-3, 0.204e-3, 0.443e-3) == 0.0  # under its floor: none
-    assert judged_share(0.443e-3, 0.3e-3, 0.443e-3) == 0.0  # at it
+    assert judged_share(0.279e-3, 0.204e-3, 0.443e-3) == pytest.approx(0.075 / 0.279)  # under
+    assert judged_share(0.93, 0.35, 1.0) == pytest.approx(0.58 / 0.93)
+    assert judged_share(0.443e-3, 0.3e-3, 0.443e-3) == pytest.approx(0.143 / 0.443)  # at it
+    assert judged_share(0.0, 0.0, 0.443e-3) == 0.0

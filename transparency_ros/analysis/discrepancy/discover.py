@@ -76,6 +76,7 @@ from transparency_ros.analysis.discrepancy.steps import (
     same,
     scan_facts,
     share_needed,
+    share_removed,
     total,
 )
 from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem
@@ -474,15 +475,14 @@ class Discoverer:
         size = total(params[: len(effects)]) + sum(
             parameter_count(a, p) for a, p in zip(added, params[len(effects) :], strict=True)
         )
-        before, after, floor = judged = self._judged(added, base, err, after_search)
+        judged = self._judged(added, base, err, after_search)
         return Step(
             added=added,
             params=params,
             err=err,
             rmse=err_rmse,
             aic=aic(err, size),
-            # the share of the error above the floor it removes (_judged says whose; none at it)
-            gain=float((before - after) / (before - floor)) if before > floor else 0.0,
+            gain=float(share_removed(*judged)),  # (of one sensor's error: _judged)
             judged=judged,
             scanned=scan_facts(self.problem, effects, added, params),
             result=result,

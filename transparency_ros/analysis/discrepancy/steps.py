@@ -105,6 +105,20 @@ def null_inside(step: Step) -> bool:
     return False
 
 
+def share_removed(before: float, after: float, floor: float) -> float:
+    """The share of the error above its noise floor that a step removes (``Step.gain``): of
+    ``before`` - ``floor``; where ``before`` is at or under the floor already, of all of it.
+    A floor is an estimate: an error under it is not noise alone where a step takes it well
+    below (a 6 ms command delay took a robot joint's error from 0.93 to 0.35 of its floor,
+    robot zoo 928), and a share of what lies above it, max(before - floor, 1e-12) as it was,
+    let any removal pass there (zoo_12214: a 0.25 ms delay that took the encoder's error
+    from 0.279 to 0.204 mrad, under its floor of 0.443, had a share of 7.5e7 and was named
+    where nothing was hidden; of all of it, 0.27)."""
+    if before > floor:
+        return (before - after) / (before - floor)
+    return (before - after) / before if before > 0 else 0.0
+
+
 def share_needed(step: Step, uniform: float) -> float:
     """The share of the error above the floor ``step`` must remove (Discoverer._names):
     ``uniform``; none for a single wave whose period stands out of its scan
