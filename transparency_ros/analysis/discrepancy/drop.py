@@ -425,9 +425,9 @@ class DropProblem:
         (``after_search``) the lattice is judged against the encoder's noise at rest, not
         against the count / sqrt 12 it would explain (Discoverer._checked_last); so is every
         such effect once the lattice is in the model (``modelled``: the effects found), which
-        then makes the readings' steps itself. Against count / sqrt 12 a 1.3 ms delay on a
-        1024-count encoder, which took the encoder's error from 1.67 to 0.38 mrad, judged on an
-        error under its floor (1.77), removed nothing (zoo_12260)."""
+        then makes the readings' steps itself (zoo_12260: after a 1024-count lattice the
+        encoder's error was 1.67 mrad, under count / sqrt 12 = 1.77, and a 1.3 ms delay took
+        it to 0.38: the model reads more finely than that floor says)."""
         if not effects or any(e.sensor != "encoder" for e in effects):
             return None
         lattice = any(isinstance(e, DropQuantization) for e in modelled)
