@@ -1029,8 +1029,8 @@ def test_once_the_lattice_is_modelled_an_encoder_effect_is_judged_against_its_no
     that encoder's floor: a count / sqrt 12 where the model reads the arm exactly, its noise at
     rest once the lattice is in the model (the model then makes the readings' steps itself).
     Against count / sqrt 12 a 1.3 ms delay on a 1024-count encoder, which took the encoder's
-    error from 1.67 to 0.38 mrad after the lattice, was judged on an error under its floor and
-    removed no share of it (zoo_12260)."""
+    error from 1.67 to 0.38 mrad after the lattice, was judged on an error under that floor
+    (zoo_12260: the model then reads more finely than the floor says)."""
     from transparency_ros.analysis.discrepancy.drop_effects import (  # noqa: PLC0415
         DropQuantization,
         SensorDelay,

@@ -482,7 +482,7 @@ class Discoverer:
             err=err,
             rmse=err_rmse,
             aic=aic(err, size),
-            gain=float(share_removed(*judged)),  # (of one sensor's error: _judged)
+            gain=share_removed(*judged),  # (of one sensor's error: _judged)
             judged=judged,
             scanned=scan_facts(self.problem, effects, added, params),
             result=result,

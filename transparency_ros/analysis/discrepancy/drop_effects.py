@@ -75,8 +75,8 @@ class GiveWay(NamedTuple):
     start: FloatArray  # their values
     taker: str  # the candidate that may take the Coulomb part
     whole: bool  # the Coulomb torque fitted to nothing (else: off nominal beside another term)
-    term: str = "coulomb_scale"  # the parameter of the part given away
-    null: float = 1.0  # its nominal value (not whole: its interval must exclude it)
+    term: str  # the parameter of the part given away
+    null: float  # its nominal value (not whole: its interval must exclude it)
 
 
 class DropDrift(DropEffect):
@@ -169,7 +169,7 @@ class DropDrift(DropEffect):
         if not whole and not (coulomb_moved and any(self.free[:2])):
             return None
         kept = DropDrift((bool(moved[0]), bool(moved[1]), False)) if moved.any() else None
-        return GiveWay(kept, s[moved], "torque_offset", whole, self.TERMS[2], 1.0)
+        return GiveWay(kept, s[moved], "torque_offset", whole, self.param_names[-1], 1.0)
 
     def reduced(self, p: FloatArray) -> tuple[DropDrift, FloatArray] | None:
         """The drift with its terms that did not drift (within ``DRIFT_MIN`` of nominal) held,

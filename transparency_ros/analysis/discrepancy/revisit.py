@@ -252,16 +252,17 @@ def friction_given_away(
         ),
         None,
     )
-    taker = None if hit is None else _candidate(loop, hit[1][2])
+    taker = None if hit is None else _candidate(loop, hit[1].taker)
     if hit is None or taker is None:
         return effects, params
-    i, (kept, start, _, whole, term, null) = hit
+    i, way = hit
+    kept, start, whole = way.kept, way.start, way.whole
     problem, drift, finding = loop.problem, effects[i], report.findings[i]
     if not whole:  # the Coulomb part told from its nominal value, or nothing to give
-        lo, hi = finding.confidence_interval.get(term, (null, null))
-        if lo <= null <= hi:
+        lo, hi = finding.confidence_interval.get(way.term, (way.null, way.null))
+        if lo <= way.null <= hi:
             return effects, params
-    coulomb = finding.parameters.get(term, float("nan"))
+    coulomb = finding.parameters.get(way.term, float("nan"))
     before = rmse(problem.error(effects, params, True))
     # the drift held to the terms that drifted, in its place (or gone where none did)
     instead = [] if kept is None else [kept]
