@@ -162,6 +162,87 @@ def test_an_effect_whose_own_fit_ends_in_another_minimum_is_judged_on_the_better
     assert any("dropped structural_compliance" in n for n in report.notes) is not stays
 
 
+@pytest.mark.parametrize(
+    ("coulomb_alone", "offset", "given_away"),
+    [(1.06e-3, 1.06e-3, True), (1.0e-3, 1.2e-3, False)],
+)
+def test_a_coulomb_part_is_compared_with_the_offset_held_to_the_terms_that_drifted(
+    coulomb_alone: float, offset: float, given_away: bool
+) -> None:
+    """The search ended with a drift of all three terms: the Coulomb torque x0.61, the inertia
+    x0.96 and the viscous term x1.00, which its own rule does not name, fitting the held-out
+    recordings 1.06 times better than the Coulomb term alone (zoo_12329, an offset hidden).
+    Where the offset explains them as the drift of its Coulomb term alone does, it is named
+    in the drift's place; where it explains them 1.2 times worse, the drift stays."""
+    from transparency_ros.analysis.discrepancy.drop_effects import (  # noqa: PLC0415
+        DropDrift,
+        DropOffset,
+    )
+    from transparency_ros.analysis.discrepancy.findings import Finding  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy.revisit import (  # noqa: PLC0415
+        friction_given_away,
+    )
+
+    drift, taker = DropDrift(), DropOffset(0.026)
+    fitted = np.array([0.96, 1.0, 0.61])
+    loop = Discoverer.__new__(Discoverer)
+    loop.progress = lambda _t: None
+    loop.problem = SimpleNamespace(
+        # the final model's held-out error, and the model without the drift's
+        error=lambda effects, _p, _h: np.full(100, 1e-3 if effects else 5e-3),
+        candidates=lambda: [taker],
+        unit="rad",
+    )
+    tried: list[object] = []
+
+    def single(
+        effects: list[object],
+        params: list[np.ndarray],
+        cand: object,
+        base: Base,
+        start: np.ndarray | None = None,
+    ) -> Step:
+        tried.append(cand)
+        after = offset if cand is taker else coulomb_alone
+        x = np.array([-0.1]) if cand is taker else np.array([0.6])
+        return Step(
+            added=[cand],
+            params=[*params, x],
+            err=np.full(100, after),
+            rmse=after,
+            aic=100 * np.log(after**2) + 2,
+            gain=0.9,
+            judged=(base.rmse, after, base.floor),
+            result=None,
+            meaningful=True,
+        )
+
+    loop._single = single  # type: ignore[method-assign]
+    loop._finding = lambda cand, *_a: SimpleNamespace(effect=cand.name)  # type: ignore[method-assign]
+    report = Report({}, {})
+    names = drift.param_names
+    report.findings = [
+        Finding(
+            drift.name,
+            dict(zip(names, fitted.tolist(), strict=True)),
+            {n: (0.9 * v, 1.1 * v) for n, v in zip(names, fitted.tolist(), strict=True)},
+            {},
+            "",
+            5e-3,
+            1e-3,
+        )
+    ]
+    effects, params = friction_given_away(loop, report, [drift], [fitted], 1e-4)
+    # the drift held to its Coulomb term, fitted from its value, then the offset
+    assert [getattr(c, "free", None) for c in tried] == [(False, False, True), None]
+    assert tried[1] is taker
+    if given_away:
+        assert effects == [taker] and params[0].tolist() == [-0.1]
+        assert [f.effect for f in report.findings] == ["torque_offset"]
+    else:
+        assert effects == [drift] and params[0] is fitted and not report.notes
+
+
 def test_fit_candidate_scans_only_without_a_start() -> None:
     """An effect with a choice to make from the data (``scan``: cogging's period) makes it when
     no start is given, and keeps the one it has when its fit starts from given values."""
