@@ -42,20 +42,28 @@ def _loop(
         if starts is not None:
             starts[cand.name] = start
         after = base.rmse - gains[cand.name] * (base.rmse - base.floor)
-        return Step(
-            added=[cand],
-            params=[*params, np.zeros(1)],
-            err=np.full(1000, after),
-            rmse=after,
-            aic=1000 * np.log(after**2) + 2,
-            gain=gains[cand.name],
-            judged=(base.rmse, after, base.floor),
-            result=None,
-            meaningful=True,
-        )
+        return _stub_step(cand, [*params, np.zeros(1)], after, gains[cand.name], base)
 
     loop._single = single  # type: ignore[method-assign]
     return loop
+
+
+def _stub_step(
+    cand: object, params: list[np.ndarray], after: float, gain: float, base: Base
+) -> Step:
+    """A step adding ``cand`` (all parameters ``params``) that leaves ``after`` of the
+    held-out error (1000 elements), removing ``gain`` of it, meaningful, without a fit."""
+    return Step(
+        added=[cand],
+        params=params,
+        err=np.full(1000, after),
+        rmse=after,
+        aic=1000 * np.log(after**2) + 2,
+        gain=gain,
+        judged=(base.rmse, after, base.floor),
+        result=None,
+        meaningful=True,
+    )
 
 
 def _report(effects: list[SimpleNamespace]) -> Report:
@@ -205,17 +213,7 @@ def test_a_coulomb_part_is_compared_with_the_offset_held_to_the_terms_that_drift
         tried.append(cand)
         after = offset if cand is taker else coulomb_alone
         x = np.array([-0.1]) if cand is taker else np.array([0.6])
-        return Step(
-            added=[cand],
-            params=[*params, x],
-            err=np.full(100, after),
-            rmse=after,
-            aic=100 * np.log(after**2) + 2,
-            gain=0.9,
-            judged=(base.rmse, after, base.floor),
-            result=None,
-            meaningful=True,
-        )
+        return _stub_step(cand, [*params, x], after, 0.9, base)
 
     loop._single = single  # type: ignore[method-assign]
     loop._finding = lambda cand, *_a: SimpleNamespace(effect=cand.name)  # type: ignore[method-assign]
