@@ -3,8 +3,10 @@ the one that really explains the recordings is tried again on the final model.""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -13,6 +15,8 @@ from transparency_ros.analysis.discrepancy.discover import Discoverer
 from transparency_ros.analysis.discrepancy.findings import Report
 from transparency_ros.analysis.discrepancy.revisit import still_needed
 from transparency_ros.analysis.discrepancy.steps import Base, Step
+
+Start = np.ndarray | None  # a fit's start (None: the candidate's own)
 
 
 def _effect(name: str, **flags: object) -> SimpleNamespace:
@@ -32,20 +36,32 @@ def _loop(
     loop.progress = lambda _t: None
     loop._searched = {id(p) for p in searched}
 
-    def single(
-        effects: list[object],
-        params: list[np.ndarray],
-        cand: object,
-        base: Base,
-        start: np.ndarray | None = None,
-    ) -> Step:
+    def fit(cand: Any, params: list[np.ndarray], base: Base, start: Start) -> Step:
         if starts is not None:
             starts[cand.name] = start
         after = base.rmse - gains[cand.name] * (base.rmse - base.floor)
         return _stub_step(cand, [*params, np.zeros(1)], after, gains[cand.name], base)
 
-    loop._single = single  # type: ignore[method-assign]
+    _stub_single(loop, fit)
     return loop
+
+
+def _stub_single(
+    loop: Discoverer, fit: Callable[[Any, list[np.ndarray], Base, Start], Step]
+) -> None:
+    """The loop's ``_single`` replaced by ``fit(cand, params, base, start)``: the candidate
+    added to a model of ``params`` (the effects themselves not looked at)."""
+
+    def single(
+        _effects: list[object],
+        params: list[np.ndarray],
+        cand: object,
+        base: Base,
+        start: Start = None,
+    ) -> Step:
+        return fit(cand, params, base, start)
+
+    loop._single = single  # type: ignore[method-assign]
 
 
 def _stub_step(
@@ -141,15 +157,9 @@ def test_an_effect_whose_own_fit_ends_in_another_minimum_is_judged_on_the_better
     )
     own = loop._single
 
-    def single(
-        effects: list[object],
-        params: list[np.ndarray],
-        cand: object,
-        base: Base,
-        start: np.ndarray | None = None,
-    ) -> Step:
+    def fit(cand: Any, params: list[np.ndarray], base: Base, start: Start) -> Step:
         starts.append(start)
-        step = own(effects, params, cand, base, start)
+        step = own([], params, cand, base, start)
         if start is None:
             return replace(step, params=[*params, np.array([1e-2])])
         after = base.rmse - 0.998 * (base.rmse - base.floor)
@@ -162,7 +172,7 @@ def test_an_effect_whose_own_fit_ends_in_another_minimum_is_judged_on_the_better
             judged=(base.rmse, after, base.floor),
         )
 
-    loop._single = single  # type: ignore[method-assign]
+    _stub_single(loop, fit)
     report = _report(effects)
     kept, _ = still_needed(loop, report, effects, values, 1e-4)
     assert starts == [None, values[1]]
@@ -203,19 +213,13 @@ def test_a_coulomb_part_is_compared_with_the_offset_held_to_the_terms_that_drift
     )
     tried: list[object] = []
 
-    def single(
-        effects: list[object],
-        params: list[np.ndarray],
-        cand: object,
-        base: Base,
-        start: np.ndarray | None = None,
-    ) -> Step:
+    def fit(cand: Any, params: list[np.ndarray], base: Base, _start: Start) -> Step:
         tried.append(cand)
         after = offset if cand is taker else coulomb_alone
         x = np.array([-0.1]) if cand is taker else np.array([0.6])
         return _stub_step(cand, [*params, x], after, 0.9, base)
 
-    loop._single = single  # type: ignore[method-assign]
+    _stub_single(loop, fit)
     loop._finding = lambda cand, *_a: SimpleNamespace(effect=cand.name)  # type: ignore[method-assign]
     report = Report({}, {})
     names = drift.param_names

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from transparency_ros.analysis.discrepancy.findings import Report, update_findings
-from transparency_ros.analysis.discrepancy.fitting import aic, interval, refit, rmse
+from transparency_ros.analysis.discrepancy.fitting import aic, fit_cost, interval, refit, rmse
 from transparency_ros.analysis.discrepancy.model import FloatArray
 from transparency_ros.analysis.discrepancy.steps import ALIKE, Base, null_inside, same, total
 
@@ -107,8 +107,8 @@ def still_needed(
         if id(cand) not in loop._searched:
             i += 1
             continue
-        others, rest = effects[:i] + effects[i + 1 :], params[:i] + params[i + 1 :]
-        rest, result = refit(loop.problem, others, rest)
+        others, final = effects[:i] + effects[i + 1 :], params[:i] + params[i + 1 :]
+        rest, result = refit(loop.problem, others, final)
         err = loop.problem.error(others, rest, True)
         base = Base(err, rmse(err), aic(err, total(rest)), floor, others, rest)
         # (a choice made from the data when it was named kept: the fit starts from its values)
@@ -119,10 +119,10 @@ def still_needed(
             # a fit from its own start, the others from their values without it, that ends
             # in another minimum: also from the final model, the better fit of the two (on
             # the fitting trials) judged
-            final = params[:i] + params[i + 1 :]
             again = loop._single(others, final, cand, base, start=params[i])
-            if fitting_cost(loop.problem, [*others, cand], again.params) < fitting_cost(
-                loop.problem, [*others, cand], step.params
+            model = [*others, cand]
+            if fit_cost(loop.problem, model, again.params, None) < fit_cost(
+                loop.problem, model, step.params, None
             ):
                 step, named = again, loop._names(again, base, loop.keep_improvement)
         if named:
@@ -138,11 +138,6 @@ def still_needed(
         if result is not None:  # the others' values and intervals, refitted without it
             update_findings(report, effects, params, interval(result, result.x))
     return effects, params
-
-
-def fitting_cost(problem: Any, effects: list[Any], params: list[FloatArray]) -> float:
-    """The sum of squares the fits minimise: the model's error on the fitting trials."""
-    return float(np.sum(problem.error(effects, params, False) ** 2))
 
 
 def variants_again(
