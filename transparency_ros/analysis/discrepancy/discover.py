@@ -15,9 +15,11 @@ least a tenth of the floor in absolute terms, the held-out information criterion
 (n log(RSS/n) + 2k) improves by more than 10, and its fit is meaningful (a wave whose period
 stands out of its scan is named without the share: ``PROMINENT_WAVE``). When no single
 candidate passes and a phase is left unexplained, candidates are fitted two at a time (two
-missing effects may each explain too little alone). A kept effect gets its parameters with 95 %
-confidence intervals (from the fit's Jacobian), where it acted (the motion phase whose residual
-it reduced most, and the trial and time window of the largest reduction) and the evidence.
+missing effects may each explain too little alone; ``pairs``), but not where one candidate
+explains it at values it cannot mean (held at a bound: a note says so). A kept effect gets
+its parameters with 95 % confidence intervals (from the fit's Jacobian), where it acted (the
+motion phase whose residual it reduced most, and the trial and time window of the largest
+reduction) and the evidence.
 Effects whose size the recording declares (the shuttle's weight: ``declared``) are not searched
 for: each is added, nothing fitted, where it improves the held-out fit, before the search and
 after each finding. A 95 % interval holding an effect's null value (``null``) names nothing;
@@ -49,14 +51,13 @@ from transparency_ros.analysis.discrepancy.findings import (
 from transparency_ros.analysis.discrepancy.fitting import (
     aic,
     fit_candidate,
-    fit_cost,
     interval,
     parameter_count,
     refit,
-    rescanned,
     rmse,
 )
 from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel, Trial
+from transparency_ros.analysis.discrepancy.pairs import beyond_range, fitted_pairs, out_of_range
 from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
 from transparency_ros.analysis.discrepancy.revisit import (
     friction_given_away,
@@ -81,8 +82,6 @@ from transparency_ros.analysis.discrepancy.steps import (
 )
 from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem
 from transparency_ros.core.errors import ModelError
-
-PAIR_FINALISTS = 3  # pairs refitted with the effects found before them
 
 
 class Discoverer:
@@ -189,13 +188,20 @@ class Discoverer:
                 step = self._choose(
                     [s for s in self._with_declared(effects, singles, base) if self._names(s, base)]
                 )
-            if step is None and pairs and unexplained_phases(problem, held_err):
+            beyond = beyond_range(self, singles, base) if step is None else []
+            if beyond:  # (one effect explains it only at values it cannot mean: no pair)
+                report.notes.append(out_of_range(beyond))
+            elif step is None and pairs and unexplained_phases(problem, held_err):
                 # a phase unexplained (3x the floor; not below: a pair fitted to nearly noise
                 # explains noise) that no single effect explains: two missing effects may each
                 # explain too little alone (zoo_12167: 2.8x the floor in all, 7x at impact)
                 self.progress("no single effect explains it: trying pairs")
                 step = self._choose(
-                    [s for s in self._pairs(effects, params, singles, base) if self._names(s, base)]
+                    [
+                        s
+                        for s in fitted_pairs(self, effects, params, singles, base)
+                        if self._names(s, base)
+                    ]
                 )
             if step is None:
                 # (a candidate refused as not meaningful, e.g. pinned at a bound, is no answer)
@@ -534,55 +540,6 @@ class Discoverer:
 
     def _choose(self, steps: list[Step]) -> Step | None:
         return choose(steps, getattr(self.problem, "expected", lambda _e, _p: False))
-
-    def _pairs(
-        self,
-        effects: list[Any],
-        params: list[FloatArray],
-        singles: list[Step],
-        base: Base,
-    ) -> list[Step]:
-        """Two candidates added together, all parameters fitted jointly from each one's own
-        fit: two effects that are both missing may each explain too little alone
-        (one stands in for the other)."""
-        n = len(effects)
-        ranked = sorted(singles, key=lambda c: c.rmse)  # a pair lists the better one first
-        fitted: list[tuple[float, Step, Step, list[FloatArray], Any]] = []
-        for i, first in enumerate(ranked):
-            for second in ranked[i + 1 :]:
-                added = [*first.added, *second.added]
-                if any(same(a, b) for a in first.added for b in second.added):
-                    continue
-                self.progress(f"trying {' + '.join(c.name for c in added)}")
-                x0 = [*params, *(x for _, x in first.new()), *(x for _, x in second.new())]
-                # the pair's own parameters first (the effects found before held)
-                own, result = refit(self.problem, [*effects, *added], x0, start=n)
-                cost = fit_cost(self.problem, [*effects, *added], own, result)
-                fitted.append((cost, first, second, own, result))
-        fitted.sort(key=lambda f: f[0])
-        out = []
-        # then, for the best few, everything together
-        for cost, first, second, own_x, own_fit in fitted[: PAIR_FINALISTS if n else len(fitted)]:
-            # (a member that chose from the data without the other chooses again beside it)
-            added, own, own_fit = rescanned(  # noqa: PLW2901 - the pair as it is kept
-                self.problem, effects, params,
-                pair=[*first.added, *second.added], own=own_x, result=own_fit, cost=cost,
-                alone=[first.new()[0][1], second.new()[0][1]],
-            )  # fmt: skip
-            # nothing fitted before the pair (the declared weight has nothing to fit): its own
-            # fit is the joint one (a refit could only return 'no better': the pair was named
-            # without intervals, zoo 30 and 1074: point intervals on widths within 1 %)
-            joint, result = (
-                (own, own_fit)
-                if not any(getattr(e, "fittable", True) for e in effects)
-                else refit(self.problem, [*effects, *added], own)
-            )
-            step = self._step(effects, joint, added, result, base)
-            step.joint = result is not None  # (without it: no intervals)
-            step.alone_rmse = [first.rmse]
-            step.alone_aic = [first.aic, second.aic]
-            out.append(step)
-        return out
 
 
 def discover(
