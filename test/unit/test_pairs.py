@@ -1,5 +1,6 @@
-"""Pairs of candidates (discrepancy.pairs): fitted where no single effect explains what is left,
-but not where one does at values it cannot mean (held at a bound of its range)."""
+"""Pairs of candidates (discrepancy.pairs): fitted where no single effect explains what is left;
+where one does only at values it cannot mean (held at a bound of its range), only pairs with
+it (one beside it may bring it into its range; two without it stand in for it)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,9 @@ import numpy as np
 import pytest
 
 from transparency_ros.analysis.discrepancy import discover as discover_module
+from transparency_ros.analysis.discrepancy import pairs as pairs_module
 from transparency_ros.analysis.discrepancy.discover import Discoverer
-from transparency_ros.analysis.discrepancy.pairs import out_of_range
+from transparency_ros.analysis.discrepancy.pairs import fitted_pairs, out_of_range
 from transparency_ros.analysis.discrepancy.steps import Base, Step
 
 N = 1000
@@ -34,12 +36,10 @@ def _step(name: str, gain: float, *, meaningful: bool) -> Step:
     )
 
 
-def _search(singles: dict[str, tuple[float, bool]], monkeypatch: pytest.MonkeyPatch) -> Any:
-    """The loop's search on a model leaving 2 mrad (floor 1 mrad; a tenth of the held-out
-    samples, phase 'fast', at 5x the floor) whose candidates remove
-    ``singles[name] = (gain, meaningful)`` of it: (the report's notes, the pairs fitted)."""
-    err = np.full(N, LEFT)
-    err[: N // 10] = 5 * FLOOR
+def _loop(singles: dict[str, tuple[float, bool]]) -> Discoverer:
+    """A loop on a model leaving 2 mrad (floor 1 mrad; a tenth of the held-out samples,
+    phase 'fast', at 5x the floor) whose candidates remove ``singles[name] = (gain,
+    meaningful)`` of it; its progress lines in ``loop.said``."""
     fast = np.zeros(N, dtype=bool)
     fast[: N // 10] = True
     loop = Discoverer.__new__(Discoverer)
@@ -50,49 +50,89 @@ def _search(singles: dict[str, tuple[float, bool]], monkeypatch: pytest.MonkeyPa
         expected=lambda _e, _p: False,
     )
     loop.min_improvement = 0.5
-    loop.progress = lambda _t: None
+    said: list[str] = []
+    loop.progress = said.append
+    loop.said = said  # type: ignore[attr-defined]
     loop._searched = set()
     made = {name: _step(name, gain, meaningful=m) for name, (gain, m) in singles.items()}
     loop._single = lambda _e, _p, cand, _b, start=None: made[cand.name]  # type: ignore[method-assign]
-    fitted: list[str] = []
+    return loop
 
-    def pairs(_loop: Discoverer, _e: Any, _p: Any, steps: list[Step], _b: Base) -> list[Step]:
-        fitted.append("+".join(s.added[0].name for s in steps))
+
+def _search(singles: dict[str, tuple[float, bool]], monkeypatch: pytest.MonkeyPatch) -> Any:
+    """The loop's search (nothing named, no pair naming): (the report's notes, the names of
+    the singles the pairs were asked to keep to)."""
+    err = np.full(N, LEFT)
+    err[: N // 10] = 5 * FLOOR
+    kept: list[list[str]] = []
+
+    def pairs(
+        _loop: Discoverer, _e: Any, _p: Any, _s: list[Step], _b: Base, *, beyond: list[Step]
+    ) -> list[Step]:
+        kept.append([s.added[0].name for s in beyond])
         return []
 
     monkeypatch.setattr(discover_module, "fitted_pairs", pairs)
     report = SimpleNamespace(notes=[])
     cands = [SimpleNamespace(name=name) for name in singles]
-    loop._search(report, [], [], err, cands)  # type: ignore[arg-type]
-    return report.notes, fitted
+    _loop(singles)._search(report, [], [], err, cands)  # type: ignore[arg-type]
+    return report.notes, kept
 
 
-def test_no_pair_is_fitted_where_one_effect_explains_it_held_at_a_bound(
+def test_pairs_keep_to_an_effect_that_explains_it_held_at_a_bound(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """The real AK80-6 arm moved by hand (benchmarks/real_injection.py): a drift held at its
-    inertia bound explained 133 % of what was left, and the pair fitted instead named an
-    offset and a payload not there. The note says which effect and at what values."""
-    notes, fitted = _search(
+    inertia bound explained 133 % of what was left, and the pair fitted without it named an
+    offset and a payload not there. The pairs keep to the drift; where none names, a note
+    says which effect explained it and at what values."""
+    notes, kept = _search(
         {"drift": (1.3, False), "offset": (0.3, True), "payload": (0.2, True)}, monkeypatch
     )
-    assert fitted == []
+    assert kept == [["drift"]]
     assert len(notes) == 1
     assert "drift (scale 5) would remove 130%" in notes[0]
-    assert "no pair" in notes[0]
 
 
-def test_pairs_are_fitted_where_no_single_effect_explains_it(
+def test_pairs_are_free_where_no_single_effect_explains_it(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """The same, the drift held at its bound removing too little to be named anyway: the
-    pairs are fitted, as where every single effect is meaningful."""
+    pairs are fitted among all, as where every single effect is meaningful; no note."""
     for drift in ((0.3, False), (0.3, True)):
-        notes, fitted = _search(
+        notes, kept = _search(
             {"drift": drift, "offset": (0.3, True), "payload": (0.2, True)}, monkeypatch
         )
         assert notes == []
-        assert fitted == ["drift+offset+payload"]
+        assert kept == [[]]
+
+
+def test_only_pairs_with_the_effect_beyond_its_range_are_fitted(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """fitted_pairs itself: with a drift beyond its range, drift + offset and drift +
+    payload are fitted, offset + payload is not; without, all three."""
+    loop = _loop({})
+    monkeypatch.setattr(pairs_module, "refit", lambda *_a, **_k: ([], None))
+    monkeypatch.setattr(pairs_module, "fit_cost", lambda *_a: 0.0)
+    monkeypatch.setattr(
+        pairs_module, "rescanned", lambda *_a, pair, own, result, **_k: (pair, own, result)
+    )
+    loop._step = lambda *_a: _step("pair", 0.0, meaningful=True)  # type: ignore[method-assign]
+    drift, offset, payload = (
+        _step("drift", 1.3, meaningful=False),
+        _step("offset", 0.3, meaningful=True),
+        _step("payload", 0.2, meaningful=True),
+    )
+    base = Base(np.full(N, LEFT), LEFT, 0.0, FLOOR, [], [])
+    fitted_pairs(loop, [], [], [drift, offset, payload], base, beyond=[drift])
+    tried = sorted(t for t in loop.said if t.startswith("trying"))  # type: ignore[attr-defined]
+    assert tried == ["trying drift + offset", "trying drift + payload"]
+    loop.said.clear()  # type: ignore[attr-defined]
+    fitted_pairs(loop, [], [], [drift, offset, payload], base)
+    tried = sorted(t for t in loop.said if t.startswith("trying"))  # type: ignore[attr-defined]
+    assert len(tried) == 3
+    assert "trying offset + payload" in tried
 
 
 def test_the_note_names_each_effect_with_its_values_and_share() -> None:

@@ -189,9 +189,7 @@ class Discoverer:
                     [s for s in self._with_declared(effects, singles, base) if self._names(s, base)]
                 )
             beyond = beyond_range(self, singles, base) if step is None else []
-            if beyond:  # (one effect explains it only at values it cannot mean: no pair)
-                report.notes.append(out_of_range(beyond))
-            elif step is None and pairs and unexplained_phases(problem, held_err):
+            if step is None and pairs and unexplained_phases(problem, held_err):
                 # a phase unexplained (3x the floor; not below: a pair fitted to nearly noise
                 # explains noise) that no single effect explains: two missing effects may each
                 # explain too little alone (zoo_12167: 2.8x the floor in all, 7x at impact)
@@ -199,12 +197,13 @@ class Discoverer:
                 step = self._choose(
                     [
                         s
-                        for s in fitted_pairs(self, effects, params, singles, base)
+                        for s in fitted_pairs(self, effects, params, singles, base, beyond=beyond)
                         if self._names(s, base)
                     ]
                 )
             if step is None:
                 # (a candidate refused as not meaningful, e.g. pinned at a bound, is no answer)
+                report.notes += [out_of_range(beyond)] if beyond else []
                 closest = max(
                     (s for s in singles if s.meaningful), key=lambda s: s.gain, default=None
                 )
