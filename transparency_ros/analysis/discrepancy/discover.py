@@ -15,8 +15,8 @@ least a tenth of the floor in absolute terms, the held-out information criterion
 (n log(RSS/n) + 2k) improves by more than 10, and its fit is meaningful (a wave whose period
 stands out of its scan is named without the share: ``PROMINENT_WAVE``). When no single
 candidate passes and a phase is left unexplained, candidates are fitted two at a time (two
-missing effects may each explain too little alone; ``pairs``), but not where one candidate
-explains it at values it cannot mean (held at a bound: a note says so). A kept effect gets
+missing effects may each explain too little alone; ``pairs``), only with it where one
+candidate explains it at values it cannot mean (held at a bound). A kept effect gets
 its parameters with 95 % confidence intervals (from the fit's Jacobian), where it acted (the
 motion phase whose residual it reduced most, and the trial and time window of the largest
 reduction) and the evidence.
