@@ -203,7 +203,8 @@ class Discoverer:
                 )
             if step is None:
                 # (a candidate refused as not meaningful, e.g. pinned at a bound, is no answer)
-                report.notes += [out_of_range(beyond)] if beyond else []
+                if beyond:  # (the pairs kept to it, or were not tried: said why)
+                    report.notes.append(out_of_range(beyond))
                 closest = max(
                     (s for s in singles if s.meaningful), key=lambda s: s.gain, default=None
                 )
