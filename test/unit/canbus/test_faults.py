@@ -99,19 +99,24 @@ def test_duplicated_replies_and_storms_are_not_published_twice(storm_rig: Rig, c
     # cycles read before the samples published (and after them below): the loop thread runs
     # between the two reads, on a busy machine several cycles (a failure at 188 - 23 > 188 - 25 + 1
     # with the reads the other way round)
-    cycles = rig.loop.cycles
+    cycles, late = rig.loop.cycles, c.late
     published = len(rig.published)
     rig.sim.faults.reply_copies = copies
     time.sleep(0.3)
+    # replies read while the device sent copies: read at the switch, not after the quiet tail (the
+    # tail's single replies counted in once made 27 of 134 replies on a busy CI machine and failed
+    # the bound, 107 < 0.9 x 241 / 2)
+    got = c.samples - samples
     rig.sim.faults.reply_copies = 1
     time.sleep(0.05)
     assert rig.loop.core.mode is DriverMode.ACTIVE and rig.faults == [], rig.faults
     # every copy beyond the first is read, counted and not handed on: one sample per reply
-    got = c.samples - samples
     assert c.duplicates - duplicates >= (copies - 1) * 0.9 * (got / copies) > 0
-    # at most one sample per cycle (+1: a cycle counts itself at its start, publishes at its end,
-    # and the snapshot above may fall in between)
-    assert len(rig.published) - published <= rig.loop.cycles - cycles + 1
+    # at most one sample per cycle besides the replies counted late (+1: a cycle counts itself at
+    # its start, publishes at its end, and the snapshot above may fall in between). A reply that
+    # missed its cycle's wait is published by the next cycle beside that cycle's own (on a loaded
+    # machine 132 samples in 129 cycles); a copy published would be counted late, not duplicate
+    assert len(rig.published) - published <= c.late - late + rig.loop.cycles - cycles + 1
     assert _in_time_order(rig.published)
 
 
