@@ -78,6 +78,7 @@ from transparency_ros.analysis.discrepancy.steps import (
     scan_facts,
     share_needed,
     share_removed,
+    stood_in,
     total,
 )
 from transparency_ros.analysis.discrepancy.torque_driven import TorqueDrivenProblem
@@ -273,10 +274,11 @@ class Discoverer:
         acting (``shown``: a drive's recorded torque held at its limit, a shuttle striking the
         arm again), or where a second channel shows it (``shows_elsewhere`` of the problem: a
         drop test's load cell reads the shuttle's weight while it rides the arm, which a
-        missing sensor delay may hide from the encoder). What is fitted of it must be told
-        from nothing (its 95 % interval without its null value): a load cell showed a
-        shuttle chatter on a rig whose contact is nearly inelastic, and the rebound fitted
-        there was 0.007 (-0.09 to 0.10). A shown effect is meaningful only at a size it shows
+        missing sensor delay may hide from the encoder), or where an effect named before it
+        had taken its place (``stood_in``: an offset fitted at the weight). What is fitted of
+        it must be told from nothing (its 95 % interval without its null value): a load cell
+        showed a shuttle chatter on a rig whose contact is nearly inelastic, and the rebound
+        fitted there was 0.007 (-0.09 to 0.10). A shown effect is meaningful only at a size it shows
         (a rebound: a coefficient that is more than the chatter of a stiff contact)."""
         return self._each_added(
             report,
@@ -296,6 +298,7 @@ class Discoverer:
                 or all(getattr(a, "shown", False) for a in step.added)
                 or (step.rmse < base.rmse and step.aic < base.aic - 10)
                 or getattr(self.problem, "shows_elsewhere", lambda _s, _b: False)(step, base)
+                or stood_in(step, base)
             )
         )
 

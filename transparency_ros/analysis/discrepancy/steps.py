@@ -119,6 +119,29 @@ def share_removed(before: float, after: float, floor: float) -> float:
     return (before - after) / before if before > 0 else 0.0
 
 
+def stood_in(step: Step, base: Base) -> bool:
+    """Whether a declared effect (its size read off the recording, nothing fitted of it) that
+    ``step`` adds explains the held-out data as well (within ``ALIKE``) or better once the
+    effects named before it are refitted beside it, and one of their values leaves its 95 %
+    interval in that refit: that effect had stood in for the declared one, which the
+    recording says is there. On zoo_12556 (a b_v drift x1.66, an offset of -0.071 N m, the
+    shuttle's weight of 0.53 N m) no single effect was named, the pair of the drift and an
+    offset was, at 0.436 N m: the offset had taken the weight, which then improved the fit by
+    nothing, a constant torque already in it."""
+    if not step.joint or getattr(step.result, "jac", None) is None:
+        return False
+    if step.rmse > ALIKE * base.rmse:
+        return False
+    ci, k = interval(step.result, step.result.x), 0
+    for effect, before in zip(base.effects, base.params, strict=True):
+        if not effect.fittable:
+            continue
+        own, k = ci[k : k + before.size], k + before.size
+        if any(not lo <= v <= hi for v, (lo, hi) in zip(before, own, strict=True)):
+            return True
+    return False
+
+
 def share_needed(step: Step, uniform: float) -> float:
     """The share of the error above the floor ``step`` must remove (Discoverer._names):
     ``uniform``; none for a single wave whose period stands out of its scan
