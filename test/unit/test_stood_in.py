@@ -6,6 +6,7 @@ the shuttle's weight of 0.53 N m; with the weight, -0.071, the truth)."""
 from __future__ import annotations
 
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -23,7 +24,7 @@ def _torque(offset: float, weight: float, slope: float) -> np.ndarray:
     return offset + weight * np.cos(ANGLE) + slope * ANGLE
 
 
-def _fit(data: np.ndarray, weight: float, effect: str) -> tuple[np.ndarray, object]:
+def _fit(data: np.ndarray, weight: float, effect: str) -> tuple[np.ndarray, Any]:
     """The fitted effect (an offset or a slope) with the weight held at ``weight``."""
 
     def residual(x: np.ndarray) -> np.ndarray:
@@ -40,11 +41,9 @@ def _case(
     """Whether the declared weight (``declared`` N m) stood in for: data with ``truth_weight``
     and ``truth_offset``, the model before it with ``effect`` (an offset or a slope) fitted."""
     data = _torque(truth_offset, truth_weight, 0.0) + RNG.normal(0.0, NOISE, ANGLE.size)
-    before, _ = _fit(data, 0.0, effect)
+    before, without = _fit(data, 0.0, effect)
     after, result = _fit(data, declared, effect)
-    err_before = _torque(*((before[0], 0.0) if effect == "offset" else (0.0, before[0])), 0.0)
-    err_before = err_before - data
-    err_after = result.fun  # type: ignore[attr-defined]
+    err_before, err_after = without.fun, result.fun
     named = SimpleNamespace(name=f"torque_{effect}", fittable=True)
     weight = SimpleNamespace(name="payload_gravity", fittable=False)
     base = Base(
