@@ -19,6 +19,7 @@ One cell:
 
 from __future__ import annotations
 
+import itertools
 import math
 import subprocess
 import time
@@ -72,6 +73,10 @@ class CellRun:
     # driven by the act torque (/joint_setpoints without a held position): t_process plus the
     # command's trip behavior -> driver -> device; None if the behavior never acted
     t_torque_s: float | None = None
+    # the longest the driver went without a sample from the ball's first contact to the sample
+    # that crossed the threshold (consecutive /joint_setpoints stamps around them): a loaded
+    # machine's stalled loop samples the dented arm that much late, and t_feel grows with it
+    sample_gap_s: float | None = None
 
 
 def _double(name: str, value: float) -> ParameterMsg:
@@ -251,7 +256,19 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
         )
     torque_s = _first_unheld_stamp(setpoints, state.detected_s)
     t_torque = None if torque_s is None or state.detected_s is None else torque_s - state.detected_s
-    return CellRun(fc.record(state, contact_s, exit_s), e_s, noise, min(rates), t_torque)
+    gap = _largest_gap(setpoints, contact_s, state.detected_s)
+    return CellRun(fc.record(state, contact_s, exit_s), e_s, noise, min(rates), t_torque, gap)
+
+
+def _largest_gap(setpoints: list[bytes], from_s: float | None, to_s: float | None
+                 ) -> float | None:  # fmt: skip
+    """The largest step between consecutive /joint_setpoints stamps that spans any of
+    [``from_s``, ``to_s``] (None: either end unknown, or no step spans it)."""
+    if from_s is None or to_s is None:
+        return None
+    stamps = sorted(decode_joint_state(data).stamp_s for data in setpoints)
+    steps = [b - a for a, b in itertools.pairwise(stamps) if b > from_s and a < to_s]
+    return max(steps, default=None)
 
 
 def _first_unheld_stamp(setpoints: list[bytes], after_s: float | None) -> float | None:
