@@ -43,6 +43,39 @@ from transparency_ros.core.histogram import DurationHistogram
 _Answer = tuple[Feedback, float, ImpedanceCommand | None]
 
 
+# a zero's answer and an older reply whose readings differ by less than this need no telling
+# apart: holding either moves the motor by less
+ZERO_SAME_FRAME_RAD = 0.01
+
+
+def reads_zeroed(position_rad: float, before: Feedback | None) -> bool:
+    """Whether a reply after a zero request reads in the new frame: nearer zero than the
+    position before the request. A reply to an older request, still in flight on a busy host
+    (or from a device thread that stalled), reads the old frame; holding it as the new zero
+    would move the motor by the old reading (CI: three motors held at 0.5 rad went back there)."""
+    if before is None or abs(before.position_rad) < ZERO_SAME_FRAME_RAD:
+        return True
+    return abs(position_rad) < abs(position_rad - before.position_rad)
+
+
+def zero_answer(receive: Callable[[float], Feedback | None], before: Feedback | None,
+                clock: Callable[[], float], timeout_s: float, quiet_s: float
+                ) -> Feedback | None:  # fmt: skip
+    """The last reply read in the new frame (:func:`reads_zeroed`) before the bus has been quiet
+    for ``quiet_s`` after it, waiting up to ``timeout_s`` for the first; None if none came."""
+    answer = None
+    deadline = clock() + timeout_s
+    while True:
+        wait = quiet_s if answer is not None else deadline - clock()
+        if wait <= 0:
+            return None
+        feedback = receive(wait)
+        if feedback is None:
+            return answer
+        if reads_zeroed(feedback.position_rad, before):
+            answer = feedback
+
+
 def command_at(command: ImpedanceCommand | None, sent_s: float, at_s: float
                ) -> ImpedanceCommand | None:  # fmt: skip
     """A command sent at ``sent_s`` as it stands at ``at_s``: its position advanced by its
@@ -225,24 +258,29 @@ class ControlLoop(PeriodicLoop):
     def set_zero(self, timeout_s: float = 0.1, quiet_s: float = 0.005) -> bool:
         """Make the current position read zero, then hold there.
 
-        Replies still in flight from earlier commands would report the old frame of reference,
-        so queued frames are dropped first and the *last* reply of a short quiet window is used
-        (a device answers in order, so that one is the answer to the zero request).
+        Replies still in flight from earlier commands report the old frame of reference, so
+        queued frames are dropped first, a reply counts as the answer only if it reads in the
+        new frame (:func:`reads_zeroed`), and the *last* such reply of a short quiet window is
+        used. Without one within ``timeout_s`` the motor is faulted and disabled (whether its
+        frame moved is unknown: holding either reading could move it by the old position) and
+        False is returned.
         """
         with self.lock:
             self.client.drain()
-            self.client.send(self.client.protocol.zero_frames(self.client.last_feedback))
-            feedback = self.client.receive(timeout_s)
-            while feedback is not None:
-                later = self.client.receive(quiet_s)
-                if later is None:
-                    break
-                feedback = later
-            if feedback is not None:
-                self.core.on_feedback(feedback.position_rad)
+            before = self.client.last_feedback
+            self.client.send(self.client.protocol.zero_frames(before))
+            answer = zero_answer(self.client.receive, before, self.clock, timeout_s, quiet_s)
+            if answer is not None:
+                self.core.on_feedback(answer.position_rad)
                 if self.core.mode is DriverMode.ACTIVE:
-                    self.core.activate(feedback.position_rad)  # hold the new zero
-            return feedback is not None
+                    self.core.activate(answer.position_rad)  # hold the new zero
+                return True
+            if self.core.mode is not DriverMode.ACTIVE:
+                return False
+            reason = f"set_zero: no reply in the new frame within {timeout_s * 1e3:.0f} ms"
+            self.emergency_stop(reason)
+        self.on_fault(reason)
+        return False
 
     # ----------------------------------------------------------------- the loop
 

@@ -24,6 +24,7 @@ over ~3 ms and cannot all answer within a 1 kHz cycle: put them on several buses
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -32,7 +33,7 @@ import can
 
 from transparency_ros.canbus.client import ActuatorClient
 from transparency_ros.canbus.clock import WALL
-from transparency_ros.canbus.loop import PeriodicLoop, command_at
+from transparency_ros.canbus.loop import PeriodicLoop, command_at, reads_zeroed
 from transparency_ros.canbus.protocol import ActuatorProtocol, Feedback, Frame
 from transparency_ros.core.driver import DriverCore, DriverMode, ImpedanceCommand
 
@@ -143,9 +144,11 @@ class MultiControlLoop(PeriodicLoop):
     def _send(self, index: int, frames: list[Frame]) -> None:
         self.clients[self.motors[index].bus].send(frames)
 
-    def _collect(self, wanted: set[int], deadline_s: float, since_wall_s: float) -> _Collected:
+    def _collect(self, wanted: set[int], deadline_s: float, since_wall_s: float,
+                 answers: Callable[[int, Feedback], bool] | None = None) -> _Collected:  # fmt: skip
         """Read replies until every motor in ``wanted`` answered or ``deadline_s``. Replies
-        stamped before ``since_wall_s`` answer older requests: counted late, state kept.
+        stamped before ``since_wall_s``, or refused by ``answers`` (motor index, reply), answer
+        older requests: counted late, state kept.
         With several buses, the wait blocks on a bus that still owes replies, in short slices
         (python-can has no portable wait on several buses), and the others are read as they are."""
         got = _Collected()
@@ -160,9 +163,10 @@ class MultiControlLoop(PeriodicLoop):
                 wait = remaining if len(owing) == 1 else min(remaining, POLL_SLICE_S)
                 feedback = client.receive(wait)
                 while feedback is not None:
-                    self._take(
-                        router.last_index, feedback, client.last_rx_wall_s, since_wall_s, got
-                    )
+                    index = router.last_index
+                    old = answers is not None and not answers(index, feedback)
+                    rx = -math.inf if old else client.last_rx_wall_s
+                    self._take(index, feedback, rx, since_wall_s, got)
                     feedback = client.receive(0.0)
                 remaining = deadline_s - self.clock()
                 if remaining <= 0:
@@ -222,25 +226,55 @@ class MultiControlLoop(PeriodicLoop):
             self._drain(float("inf"))
 
     def set_zero(self, timeout_s: float = 0.1, quiet_s: float = 0.005) -> list[str]:
-        """Make every motor's current position read zero, then hold there. The last reply of
-        each motor within a quiet window is its answer (replies to older commands come first).
-        Returns the motors that did not answer."""
+        """Make every motor's current position read zero, then hold there. A motor's answer is
+        its last reply in the new frame (``loop.reads_zeroed``: replies to older commands come
+        first and read the old one) within a quiet window. Returns the motors without one:
+        they are faulted and disabled (whether their frame moved is unknown), and with
+        ``fault_policy`` all, every other motor with them."""
         with self.lock:
             self._drain(float("inf"))
             since = WALL(self.clock())
+            before = [motor.last_feedback for motor in self.motors]
             for i, motor in enumerate(self.motors):
-                self._send(i, motor.protocol.zero_frames(motor.last_feedback))
+                self._send(i, motor.protocol.zero_frames(before[i]))
+
+            def zeroed(index: int, feedback: Feedback) -> bool:
+                return reads_zeroed(feedback.position_rad, before[index])
+
             wanted = set(range(len(self.motors)))
-            got = self._collect(wanted, self.clock() + timeout_s, since)
+            got = self._collect(wanted, self.clock() + timeout_s, since, zeroed)
             while True:  # keep the newest of each until the bus is quiet
-                more = self._collect(wanted, self.clock() + quiet_s, since)
+                more = self._collect(wanted, self.clock() + quiet_s, since, zeroed)
                 if not more.replies:
                     break
                 got.replies.update(more.replies)
             for i, motor in enumerate(self.motors):
                 if i in got.replies and motor.core.mode is DriverMode.ACTIVE:
                     motor.core.activate(got.replies[i][0].position_rad)
-            return [m.name for i, m in enumerate(self.motors) if i not in got.replies]
+            silent = [i for i in wanted - got.replies.keys()
+                      if self.motors[i].core.mode is DriverMode.ACTIVE]  # fmt: skip
+            reason = f"set_zero: no reply in the new frame within {timeout_s * 1e3:.0f} ms"
+            self._trip(silent, reason)
+            missing = [m.name for i, m in enumerate(self.motors) if i not in got.replies]
+        if silent:
+            self.on_fault(f"{', '.join(self.motors[i].name for i in silent)}: {reason}")
+        return missing
+
+    def _trip(self, indices: list[int], reason: str | None = None) -> None:
+        """Fault (for ``reason``; None: they faulted themselves) and disable the motors
+        ``indices``, and with ``fault_policy`` all, every motor still active with them."""
+        if not indices:
+            return
+        names = ", ".join(self.motors[i].name for i in indices)
+        others = [i for i, m in enumerate(self.motors)
+                  if i not in indices and m.core.mode is DriverMode.ACTIVE]  # fmt: skip
+        for i in indices + (others if self.fault_policy == "all" else []):
+            motor = self.motors[i]
+            if i not in indices:
+                motor.core.fault(f"disabled with {names} (fault_policy all)")
+            elif reason is not None:
+                motor.core.fault(reason)
+            self._send(i, motor.protocol.disable_frames())
 
     # ----------------------------------------------------------------- the loop
 
@@ -264,16 +298,9 @@ class MultiControlLoop(PeriodicLoop):
             tripped = [i for i in sorted(driven - got.replies.keys())
                        if self.motors[i].core.on_missed_reply(
                            sent_s, self.min_unanswered(self.motors[i].core))]  # fmt: skip
-            for i in tripped:
-                motor = self.motors[i]
-                self._send(i, motor.protocol.disable_frames())
-                faults.append(f"{motor.name}: {motor.core.status.fault_reason}")
-            if tripped and self.fault_policy == "all":
-                names = ", ".join(self.motors[i].name for i in tripped)
-                for i, motor in enumerate(self.motors):
-                    if i not in tripped and motor.core.mode is DriverMode.ACTIVE:
-                        motor.core.fault(f"disabled with {names} (fault_policy all)")
-                        self._send(i, motor.protocol.disable_frames())
+            faults = [f"{self.motors[i].name}: {self.motors[i].core.status.fault_reason}"
+                      for i in tripped]  # fmt: skip
+            self._trip(tripped)
             sample = self._sample(got, sent_s, sent_wall_s, commands)
         if sample is not None:
             self.on_sample(sample)

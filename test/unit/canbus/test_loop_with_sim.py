@@ -11,9 +11,10 @@ import pytest
 
 from transparency_ros.canbus.client import ActuatorClient, BusSettings, to_message
 from transparency_ros.canbus.errors import BusError
-from transparency_ros.canbus.loop import ControlLoop
+from transparency_ros.canbus.loop import ControlLoop, reads_zeroed
 from transparency_ros.canbus.protocol import (
     ActuatorProtocol,
+    Feedback,
     MitProtocol,
     MoteusProtocol,
     ODriveProtocol,
@@ -125,6 +126,61 @@ def test_silent_bus_trips_the_fault_after_the_configured_silence(
     # re-enable
     loop.stop()
     assert loop.enable() is not None and loop.core.mode is DriverMode.ACTIVE
+
+
+@pytest.mark.parametrize(
+    ("position", "before", "zeroed"),
+    [(0.01, 0.5, True), (0.49, 0.5, False), (-0.3, -0.5, False), (0.2, -0.5, True),
+     (0.004, 0.004, True), (0.3, None, True)],
+)  # fmt: skip
+def test_a_reply_reads_the_new_frame_when_nearer_zero_than_the_old_reading(
+    position: float, before: float | None, zeroed: bool
+) -> None:
+    last = None if before is None else Feedback(before, 0.0, 0.0)
+    assert reads_zeroed(position, last) is zeroed
+
+
+def test_set_zero_does_not_take_an_older_reply_for_its_answer(
+    rig: tuple[str, ControlLoop, SimulatedActuator],
+) -> None:
+    """Replies to commands sent before the zero are still on their way (the device answers
+    50 ms late, longer than the 5 ms quiet window): the answer is the reply in the new frame,
+    and the motor holds the new zero, not its old reading (CI, loaded: three motors held at
+    0.5 rad were told to hold 0.5 in the new frame)."""
+    name, loop, sim = rig
+    assert loop.enable() is not None
+    loop.start()
+    with loop.lock:
+        loop.core.set_target(JointTarget(0.5), time.monotonic())
+    assert wait_for(lambda: (fb := loop.client.last_feedback) is not None
+                    and abs(fb.position_rad - 0.5) < 0.05), name  # fmt: skip
+    loop.stop()
+    sim.faults.reply_delay_s = 0.05
+    hold = loop.core.command(time.monotonic())
+    assert hold is not None
+    for _ in range(3):  # their replies come 50 ms later, in the old frame
+        loop.client.send(loop.client.protocol.command_frames(hold, loop.client.last_feedback))
+        time.sleep(0.002)
+    time.sleep(0.015)
+    assert loop.set_zero() is True
+    held = loop.core.command(time.monotonic())
+    assert held is not None and abs(held.position_rad) < 0.05, (name, held)
+
+
+def test_set_zero_without_an_answer_faults_and_disables(
+    rig: tuple[str, ControlLoop, SimulatedActuator],
+) -> None:
+    name, loop, sim = rig
+    assert loop.enable() is not None
+    faults: list[str] = []
+    loop.on_fault = faults.append
+    loop.cycle()
+    exits_before = sim.events[EXIT_EVENT[name]]
+    sim.silence()
+    assert loop.set_zero(timeout_s=0.02) is False
+    assert loop.core.mode is DriverMode.FAULT and loop.core.command(time.monotonic()) is None
+    assert faults and faults[0].startswith("set_zero: no reply in the new frame"), faults
+    assert wait_for(lambda: sim.events[EXIT_EVENT[name]] > exits_before), sim.events
 
 
 def test_a_loop_exception_leaves_the_motor_disabled(

@@ -213,6 +213,30 @@ def test_set_zero_zeroes_every_motor(robot: Robot) -> None:
     assert all(abs(fb.position_rad) < 0.03 for fb in robot.samples[-1].feedback)
 
 
+@pytest.mark.parametrize(
+    "robot", [("mit", [1, 2, 3], 1, "all"), ("mit", [1, 2, 3], 1, "motor")],
+    indirect=True, ids=["policy-all", "policy-motor"],
+)  # fmt: skip
+def test_a_zero_without_an_answer_faults_and_disables(robot: Robot) -> None:
+    """Whether a silent motor's frame moved is unknown: it is not driven on either reading."""
+    loop = robot.loop
+    assert loop.enable() == []
+    loop.cycle()
+    sim, device = robot.sim_of(1)
+    sim.silence(device)
+    assert loop.set_zero(timeout_s=0.02) == ["j2"]
+    assert loop.motors[1].core.mode is DriverMode.FAULT
+    assert robot.faults and robot.faults[0].startswith("j2: set_zero: no reply in the new frame")
+    assert wait_for(lambda: not sim.personalities[device].is_enabled())
+    others = [loop.motors[i].core.mode for i in (0, 2)]
+    if loop.fault_policy == "all":
+        assert others == [DriverMode.FAULT] * 2
+        assert wait_for(lambda: not any(sim.enabled()))
+    else:
+        assert others == [DriverMode.ACTIVE] * 2
+        assert sim.enabled() == [True, False, True]
+
+
 def test_bad_configurations_are_refused() -> None:
     core = DriverCore(DriverSettings())
     bus = BusSettings(channel=f"multi_{next(_channels)}").open()
