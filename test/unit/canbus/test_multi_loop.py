@@ -107,6 +107,18 @@ def wait_for(condition, timeout_s: float = 3.0) -> bool:  # type: ignore[no-unty
     return False
 
 
+def assert_the_others_follow_the_policy(loop: MultiControlLoop, sim: SimulatedBus) -> None:
+    """j2 (of three on one bus) was stopped: with fault_policy all the others are stopped with
+    it, with motor they keep being driven."""
+    others = [loop.motors[i].core.mode for i in (0, 2)]
+    if loop.fault_policy == "all":
+        assert others == [DriverMode.FAULT] * 2
+        assert wait_for(lambda: not any(sim.enabled()))
+    else:
+        assert others == [DriverMode.ACTIVE] * 2
+        assert sim.enabled() == [True, False, True]
+
+
 @pytest.mark.parametrize(
     "robot",
     [("mit", [1, 2, 3], 1, "all"), ("odrive", [3, 4, 5], 1, "all"),
@@ -156,13 +168,7 @@ def test_a_silent_motor_trips_its_own_watchdog(robot: Robot) -> None:
     assert robot.faults[0].startswith("j2: ")
     silent = sim.personalities[device]
     assert wait_for(lambda: not silent.is_enabled()), "the silent motor was not sent disable"
-    others = [loop.motors[i].core.mode for i in (0, 2)]
-    if loop.fault_policy == "all":
-        assert others == [DriverMode.FAULT] * 2
-        assert wait_for(lambda: not any(sim.enabled()))
-    else:
-        assert others == [DriverMode.ACTIVE] * 2
-        assert sim.enabled() == [True, False, True]
+    assert_the_others_follow_the_policy(loop, sim)
     # driven or disabled, the motors that answer keep being published (disabled ones polled)
     count = len(robot.samples)
     time.sleep(0.1)
@@ -228,13 +234,7 @@ def test_a_zero_without_an_answer_faults_and_disables(robot: Robot) -> None:
     assert loop.motors[1].core.mode is DriverMode.FAULT
     assert robot.faults and robot.faults[0].startswith("j2: set_zero: no reply in the new frame")
     assert wait_for(lambda: not sim.personalities[device].is_enabled())
-    others = [loop.motors[i].core.mode for i in (0, 2)]
-    if loop.fault_policy == "all":
-        assert others == [DriverMode.FAULT] * 2
-        assert wait_for(lambda: not any(sim.enabled()))
-    else:
-        assert others == [DriverMode.ACTIVE] * 2
-        assert sim.enabled() == [True, False, True]
+    assert_the_others_follow_the_policy(loop, sim)
 
 
 def test_bad_configurations_are_refused() -> None:
