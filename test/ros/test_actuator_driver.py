@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -376,15 +377,25 @@ def test_failures_leave_the_motor_disabled(how: str) -> None:
         [sys.executable, "-c", FAILING_DRIVER, how, "-p", "publish_rate_hz:=200.0"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ),
     )  # fmt: skip
+    lines: list[str] = []
+    assert proc.stdout is not None
+    reader = threading.Thread(target=lambda: lines.extend(proc.stdout or []), daemon=True)
+    reader.start()
     try:
         if how == "hardware loop exception":
-            time.sleep(4.0)  # the loop has failed; the node runs on, the motor is off
+            # the loop has failed (2 s after the process started, once it runs: a loaded
+            # machine took over 4 s to start it); the node runs on, the motor is off
+            assert wait_for(lambda: any("hardware loop stopped" in ln for ln in lines), 30.0), (
+                "".join(lines)
+            )
             assert proc.poll() is None
             proc.send_signal(signal.SIGINT)
-        output, _ = proc.communicate(timeout=30)
+        proc.wait(timeout=30)
+        reader.join(timeout=10)
     finally:
         if proc.poll() is None:
             proc.kill()
+    output = "".join(lines)
     assert INJECTED[how] in output, output
     seen = seen_line(output)
     assert "enter=1" in seen and "exit=" in seen and "exit=0" not in seen, seen
@@ -484,16 +495,18 @@ def test_one_silent_motor_among_several(driver_factory: Any, policy: str) -> Non
     if policy == "all":
         assert wait_for(lambda: not any(sim.enabled()), 2.0)
         assert all(core.mode is DriverMode.FAULT for core in node.cores)
-        time.sleep(0.2)  # disabled, still published; the silent knee in no message
-        assert wait_for(lambda: list(probe.states[-1].name) == ["hip", "ankle"], 2.0)
-        assert not any("knee" in m.name for m in probe.states[-20:])
+        # disabled, still published; the silent knee in no message (the last 20, as below)
+        assert wait_for(lambda: not any("knee" in m.name for m in probe.states[-20:]), 2.0)
+        assert list(probe.states[-1].name) == ["hip", "ankle"]
     else:
         # the knee disabled, the others driving (the simulated motors take the disable from a
         # thread of this process: 0.2 s of sleep was too little with two test suites sharing
         # the two cores, 1 of 2 runs at 324f900)
         assert wait_for(lambda: sim.enabled() == [True, False, True], 2.0)
-        assert wait_for(lambda: list(probe.states[-1].name) == ["hip", "ankle"], 2.0)
-        assert not any("knee" in m.name for m in probe.states[-20:])
+        # (the last 20 messages without it: a loaded machine delivers them in bursts, and the
+        # latest without the knee came with some before it that had it)
+        assert wait_for(lambda: not any("knee" in m.name for m in probe.states[-20:]), 2.0)
+        assert list(probe.states[-1].name) == ["hip", "ankle"]
         # re-enabling needs every motor to answer; with the knee still silent it fails safe
         response = probe.call(SetBool, "/actuator_driver/enable", SetBool.Request(data=True))
         assert not response.success and "knee" in response.message
