@@ -330,6 +330,12 @@ class ControlLoop(PeriodicLoop):
                 if rx is not None:
                     self._last_rx_wall_s = max(self._last_rx_wall_s, rx)
                 self.core.on_feedback(feedback.position_rad, sent_s)
+                if feedback.device_fault and self.core.mode is DriverMode.ACTIVE:
+                    # the device stopped driving on its own: the driver stops too (disabled,
+                    # FAULT until re-enabled), not commanding a motor that does not follow
+                    reason = f"the device reports: {feedback.device_fault}"
+                    self.core.fault(reason)
+                    self.client.send(self.client.protocol.disable_frames())
             elif command is not None and self.core.on_missed_reply(  # (a motor not driven
                 sent_s,
                 self.min_unanswered(self.core),  # has no watchdog: nothing to disable)

@@ -57,6 +57,22 @@ class Mode(IntEnum):
     TIMEOUT = 11
 
 
+def mode_fault(values: Mapping[int, float]) -> str:
+    """What a reply's mode says stops the controller driving ("": nothing, or no mode read):
+    a fault (with its code) or the position watchdog's timeout, both latched until a stop
+    command (moteus reference: a controller not commanded within its watchdog's time enters
+    the timeout mode and stays there)."""
+    mode = values.get(Reg.MODE)
+    if mode is None or math.isnan(mode):
+        return ""
+    if int(mode) == Mode.FAULT:
+        code = values.get(Reg.FAULT, math.nan)
+        return f"moteus fault (code {'?' if math.isnan(code) else int(code)})"
+    if int(mode) == Mode.TIMEOUT:
+        return "moteus position timeout: no command within its watchdog time (latched)"
+    return ""
+
+
 WRITE, READ, REPLY = 0x00, 0x10, 0x20
 WRITE_ERROR, READ_ERROR, NOP = 0x30, 0x31, 0x50
 FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)

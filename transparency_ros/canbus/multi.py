@@ -298,6 +298,12 @@ class MultiControlLoop(PeriodicLoop):
             tripped = [i for i in sorted(driven - got.replies.keys())
                        if self.motors[i].core.on_missed_reply(
                            sent_s, self.min_unanswered(self.motors[i].core))]  # fmt: skip
+            # a device that stopped driving on its own (its reply says so) stops its motor too
+            for i, (feedback, _rx) in sorted(got.replies.items()):
+                core = self.motors[i].core
+                if feedback.device_fault and core.mode is DriverMode.ACTIVE:
+                    core.fault(f"the device reports: {feedback.device_fault}")
+                    tripped.append(i)
             faults = [f"{self.motors[i].name}: {self.motors[i].core.status.fault_reason}"
                       for i in tripped]  # fmt: skip
             self._trip(tripped)

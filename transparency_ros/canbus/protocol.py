@@ -45,6 +45,9 @@ class Feedback:
     position_rad: float
     velocity_rad_s: float
     torque_nm: float
+    # what the device says stops it driving the motor, in its own words ("": nothing, or a
+    # protocol whose replies do not say): moteus' fault and latched watchdog modes
+    device_fault: str = ""
 
 
 class ActuatorProtocol(ABC):
@@ -351,6 +354,7 @@ class MoteusProtocol(ActuatorProtocol):
             float(values[moteus_fd.Reg.POSITION]) * TWO_PI / g - self.zero_offset_rad,
             float(values[moteus_fd.Reg.VELOCITY]) * TWO_PI / g,
             float(values[moteus_fd.Reg.TORQUE]) * g,
+            moteus_fd.mode_fault(values),
         )
 
 

@@ -235,8 +235,15 @@ class ODriveDevice(Personality):
         return [Frame(self._id(odrive.Cmd.HEARTBEAT), odrive.encode_heartbeat(hb))]
 
 
+# moteus modes a controller stays in until commanded to stop (its watchdog's timeout, a fault)
+LATCHED = (moteus_fd.Mode.TIMEOUT, moteus_fd.Mode.FAULT)
+
+
 class MoteusDevice(Personality):
-    """moteus: register writes set the mode and position-mode terms; reads are answered."""
+    """moteus: register writes set the mode and position-mode terms; reads are answered. Not
+    commanded within the watchdog time the host wrote, it enters the position-timeout mode
+    (damping only) and, as the firmware does, stays there until a stop command: later position
+    commands are ignored (counted as ``ignored_while_latched``) and the replies say the mode."""
 
     def __init__(
         self,
@@ -262,6 +269,8 @@ class MoteusDevice(Personality):
 
     def _apply(self, now_s: float) -> None:
         r = self.registers
+        if self.mode is moteus_fd.Mode.TIMEOUT:
+            return  # the watchdog's damping holds (tick) until a stop
         if self.mode != moteus_fd.Mode.POSITION:
             self.drive = zero_drive
             return
@@ -294,7 +303,11 @@ class MoteusDevice(Personality):
         for sub in subframes:
             if sub.op == moteus_fd.WRITE and sub.value is not None:
                 if sub.register == moteus_fd.Reg.MODE:
-                    self.mode = moteus_fd.Mode(int(sub.value))
+                    mode = moteus_fd.Mode(int(sub.value))
+                    if self.mode in LATCHED and mode is not moteus_fd.Mode.STOPPED:
+                        self.events["ignored_while_latched"] += 1  # a stop clears it
+                        continue
+                    self.mode = mode
                     self.events[f"mode_{self.mode.name.lower()}"] += 1
                 else:
                     self.registers[sub.register] = float(sub.value)

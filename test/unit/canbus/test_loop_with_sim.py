@@ -185,6 +185,42 @@ def test_set_zero_without_an_answer_faults_and_disables(
     assert wait_for(lambda: sim.events[EXIT_EVENT[name]] > exits_before), sim.events
 
 
+def test_a_device_that_stops_driving_on_its_own_faults_the_driver() -> None:
+    """A moteus whose host fell silent for longer than its watchdog (a stalled computer) latches
+    its timeout mode and no longer follows; its replies say so. The driver faults and disables
+    it (a stop clears the latch) instead of commanding a motor that does not follow; enabling
+    again drives it again."""
+    protocol, personality = make("moteus")
+    settings = BusSettings(channel=f"loop_test_{next(_channels)}", fd=True)
+    physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
+    with SimulatedActuator(physics, personality, settings) as sim:
+        client = ActuatorClient(protocol, settings.open())
+        core = DriverCore(DriverSettings())
+        loop = ControlLoop(client, core, rate_hz=500.0, reply_timeout_s=0.0015)
+        faults: list[str] = []
+        loop.on_fault = faults.append
+        try:
+            assert loop.enable() is not None
+            loop.start()
+            assert wait_for(sim.personality.is_enabled)
+            loop.stop()  # the host stalls past the device's 0.1 s watchdog
+            assert wait_for(lambda: sim.events["watchdog_timeout"] >= 1), sim.events
+            stops = sim.events["mode_stopped"]
+            loop.start()
+            assert wait_for(lambda: loop.core.mode is DriverMode.FAULT), loop.core.status
+            assert faults and "position timeout" in faults[0], faults
+            assert sim.events["ignored_while_latched"] >= 1, sim.events  # commands refused
+            assert wait_for(lambda: sim.events["mode_stopped"] > stops), sim.events  # cleared
+            loop.stop()
+            assert loop.enable() is not None and loop.core.mode is DriverMode.ACTIVE
+            loop.start()
+            assert wait_for(sim.personality.is_enabled), sim.events
+        finally:
+            loop.stop()
+            loop.disable()
+            client.close()
+
+
 def test_a_loop_exception_leaves_the_motor_disabled(
     rig: tuple[str, ControlLoop, SimulatedActuator],
 ) -> None:

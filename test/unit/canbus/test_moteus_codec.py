@@ -136,3 +136,16 @@ def test_padding_and_errors() -> None:
     assert errors == [m.Subframe(m.READ_ERROR, 5, None, 2)]
     with pytest.raises(CanProtocolError, match=r"destination id must be 0\.\.127"):
         m.arbitration_id(0, 200, reply=True)
+
+
+def test_a_reply_in_a_latched_mode_names_why_the_controller_stopped() -> None:
+    """Modes as the moteus library numbers them: a fault (with its code) and the position
+    watchdog's timeout stop the controller driving; every other mode, or none read, does not."""
+    fault = {m.Reg.MODE: float(moteus.Mode.FAULT), m.Reg.FAULT: 33.0}
+    assert m.mode_fault(fault) == "moteus fault (code 33)"
+    assert m.mode_fault({m.Reg.MODE: float(moteus.Mode.FAULT)}) == "moteus fault (code ?)"
+    assert "position timeout" in m.mode_fault({m.Reg.MODE: float(moteus.Mode.TIMEOUT)})
+    for mode in (moteus.Mode.STOPPED, moteus.Mode.POSITION, moteus.Mode.ZERO_VELOCITY):
+        assert m.mode_fault({m.Reg.MODE: float(mode)}) == ""
+    assert m.mode_fault({m.Reg.POSITION: 0.1}) == ""
+    assert m.mode_fault({m.Reg.MODE: math.nan}) == ""

@@ -237,6 +237,29 @@ def test_a_zero_without_an_answer_faults_and_disables(robot: Robot) -> None:
     assert_the_others_follow_the_policy(loop, sim)
 
 
+@pytest.mark.parametrize("robot", [("moteus", [1, 2, 3], 1, "motor")], indirect=True)
+def test_motors_that_stop_driving_on_their_own_fault_the_driver(robot: Robot) -> None:
+    """The loop stalls past the moteus' 0.1 s watchdog: each latches its timeout, says so in its
+    replies, and is faulted and disabled by the driver (even with fault_policy motor, since
+    each reports it); enabling again drives them again."""
+    loop = robot.loop
+    assert loop.enable() == []
+    loop.start()
+    sim = robot.sims[0]
+    assert wait_for(lambda: all(sim.enabled()))
+    loop.stop()
+    time.sleep(0.2)
+    loop.start()
+    assert wait_for(lambda: all(m.core.mode is DriverMode.FAULT for m in loop.motors))
+    assert len(robot.faults) == 3 and all(
+        "the device reports: moteus position timeout" in f for f in robot.faults
+    ), robot.faults
+    loop.stop()
+    assert loop.enable() == []
+    loop.start()
+    assert wait_for(lambda: all(sim.enabled())), sim.enabled()
+
+
 def test_bad_configurations_are_refused() -> None:
     core = DriverCore(DriverSettings())
     bus = BusSettings(channel=f"multi_{next(_channels)}").open()
