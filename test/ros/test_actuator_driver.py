@@ -92,6 +92,9 @@ def driver_factory(ros_context: Context) -> Iterator[Any]:
             "channel": f"ros_test_{next(_channels)}",
             "publish_rate_hz": 250.0,
             "reply_timeout_s": 0.002,
+            # (a moteus' own watchdog at 1 s, not 0.1: a stall of this test process under a
+            # loaded suite would latch it, and these tests are not about it; test_loop_with_sim is)
+            **({"moteus.watchdog_timeout_s": 1.0} if protocol == "moteus" else {}),
             **params,
         }
         node = ActuatorDriverNode(
