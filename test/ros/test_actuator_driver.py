@@ -92,9 +92,10 @@ def driver_factory(ros_context: Context) -> Iterator[Any]:
             "channel": f"ros_test_{next(_channels)}",
             "publish_rate_hz": 250.0,
             "reply_timeout_s": 0.002,
-            # (a moteus' own watchdog at 1 s, not 0.1: a stall of this test process under a
-            # loaded suite would latch it, and these tests are not about it; test_loop_with_sim is)
-            **({"moteus.watchdog_timeout_s": 1.0} if protocol == "moteus" else {}),
+            # (a moteus' own watchdog at 10 s, the most it takes, not 0.1: a stall of this test
+            # process under a loaded suite latches it, and these tests are not about it;
+            # test_loop_with_sim is)
+            **({"moteus.watchdog_timeout_s": 10.0} if protocol == "moteus" else {}),
             **params,
         }
         node = ActuatorDriverNode(
@@ -140,7 +141,12 @@ def test_commands_move_the_joint_at_the_configured_rate(driver_factory: Any, pro
     # commands move the simulated joint (U10DD: within the static friction band tau_s / k_s)
     probe.command(0.7)
     assert wait_for(lambda: abs(probe.last_position() - 0.7) < 0.075 / 2.0 + 0.01, 3.0)
-    assert abs(node.sim.physics.state.motor_position_rad - 0.7) < 0.05
+    # (the simulated arm settles there: read at one instant under load it was seen 0.26 rad
+    # past, moving, as ODrive's torque mode keeps applying the host's last torque through a
+    # stall of this process; see docs/known_issues.md)
+    assert wait_for(lambda: abs(node.sim.physics.state.motor_position_rad - 0.7) < 0.05, 3.0), (
+        node.sim.physics.state
+    )
 
 
 @pytest.mark.parametrize("protocol", PROTOCOLS)

@@ -37,8 +37,9 @@ def make(name: str, motor_id: int) -> tuple[ActuatorProtocol, Personality]:
         return MitProtocol(motor_id), MitDevice(motor_id)
     if name == "odrive":
         return ODriveProtocol(motor_id), ODriveDevice(motor_id)
-    # (its own watchdog at 1 s: a stall of this process under load would latch it at 0.1)
-    return MoteusProtocol(motor_id, watchdog_timeout_s=1.0), MoteusDevice(motor_id)
+    # (its own watchdog at 10 s: a stall of this process under load latches it at 0.1, and
+    # was seen to at 1 s in test_faults)
+    return MoteusProtocol(motor_id, watchdog_timeout_s=10.0), MoteusDevice(motor_id)
 
 
 @dataclass
@@ -240,16 +241,18 @@ def test_a_zero_without_an_answer_faults_and_disables(robot: Robot) -> None:
 
 @pytest.mark.parametrize("robot", [("moteus", [1, 2, 3], 1, "motor")], indirect=True)
 def test_motors_that_stop_driving_on_their_own_fault_the_driver(robot: Robot) -> None:
-    """The loop stalls past the moteus' watchdog (1 s here): each latches its timeout, says so
-    in its replies, and is faulted and disabled by the driver (even with fault_policy motor,
-    since each reports it); enabling again drives them again."""
+    """The loop stalls past the moteus' watchdog (0.1 s, the default, here): each latches its
+    timeout, says so in its replies, and is faulted and disabled by the driver (even with
+    fault_policy motor, since each reports it); enabling again drives them again."""
     loop = robot.loop
+    for motor in loop.motors:  # (written with every command)
+        motor.protocol.watchdog_timeout_s = 0.1  # type: ignore[attr-defined]
     assert loop.enable() == []
     loop.start()
     sim = robot.sims[0]
     assert wait_for(lambda: all(sim.enabled()))
     loop.stop()
-    time.sleep(1.3)
+    time.sleep(0.3)
     loop.start()
     assert wait_for(lambda: all(m.core.mode is DriverMode.FAULT for m in loop.motors))
     assert len(robot.faults) == 3 and all(
