@@ -48,8 +48,7 @@ def make(name: str) -> tuple[ActuatorProtocol, Personality]:
     if name == "odrive":
         return ODriveProtocol(5), ODriveDevice(5)
     # (the device's own watchdog at 10 s, the most it takes, not 0.1: these rigs are not about
-    # it, and a stall of this process under a loaded suite latches it (CI-like load, two suites
-    # at once: a moteus bus-off test saw the watchdog's fault, not the bus's, at 1 s);
+    # it, and a stall of this process under a loaded suite would latch it;
     # test_a_device_that_stops_... is about it)
     return MoteusProtocol(2, watchdog_timeout_s=RIG_MOTEUS_WATCHDOG_S), MoteusDevice(2)
 
@@ -62,7 +61,10 @@ def rig(request: pytest.FixtureRequest) -> Iterator[tuple[str, ControlLoop, Simu
     physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
     sim = SimulatedActuator(physics, personality, settings).start()
     client = ActuatorClient(protocol, settings.open())
-    core = DriverCore(DriverSettings(reply_silence_s=0.008))
+    # the driver's default silence, 0.1 s: the simulator answers from a thread of this process,
+    # and at 8 ms a stall of it under a loaded run tripped the reply watchdog in tests not
+    # about it (and in the silence test before the bus went silent: 9 commands, then polls)
+    core = DriverCore(DriverSettings(reply_silence_s=0.1))
     loop = ControlLoop(client, core, rate_hz=500.0, reply_timeout_s=0.0015)
     yield name, loop, sim
     loop.stop()
@@ -110,6 +112,7 @@ def test_silent_bus_trips_the_fault_after_the_configured_silence(
     loop.on_fault = faults.append
     loop.start()
     assert wait_for(lambda: loop.client.counters.samples > 20)
+    assert loop.core.mode is DriverMode.ACTIVE and faults == [], faults
     exits_before = sim.events[EXIT_EVENT[name]]
     sim.silence()
     assert wait_for(lambda: loop.core.mode is DriverMode.FAULT)
@@ -119,7 +122,7 @@ def test_silent_bus_trips_the_fault_after_the_configured_silence(
     # fault said 4 unanswered at 9 ms, a late reply ended the silence at 14 ms)
     unanswered = re.search(r"\((\d+) requests unanswered\)", faults[0])
     assert unanswered is not None, faults
-    assert int(unanswered.group(1)) >= loop.min_unanswered(loop.core) == 3, faults
+    assert int(unanswered.group(1)) >= loop.min_unanswered(loop.core) == 25, faults
     # the safe command went out although nothing answers
     assert wait_for(lambda: sim.events[EXIT_EVENT[name]] > exits_before), sim.events
     # in FAULT the motor is polled, never driven; once it answers again its state is

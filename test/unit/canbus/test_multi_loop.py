@@ -37,8 +37,7 @@ def make(name: str, motor_id: int) -> tuple[ActuatorProtocol, Personality]:
         return MitProtocol(motor_id), MitDevice(motor_id)
     if name == "odrive":
         return ODriveProtocol(motor_id), ODriveDevice(motor_id)
-    # (its own watchdog at 10 s: a stall of this process under load latches it at 0.1, and
-    # was seen to at 1 s in test_faults)
+    # (its own watchdog at 10 s: a stall of this process under load would latch it at 0.1)
     return MoteusProtocol(motor_id, watchdog_timeout_s=10.0), MoteusDevice(motor_id)
 
 
