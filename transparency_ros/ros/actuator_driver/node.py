@@ -490,10 +490,18 @@ class ActuatorDriverNode(CommandInput, LifecycleNode):
         elif isinstance(loop, MultiControlLoop):
             silent = loop.set_zero()
             response.success = not silent
-            response.message = f"no reply from {silent}" if silent else "positions are now zero"
+            response.message = (
+                f"no reply in the new frame from {silent} (driven ones are faulted and disabled)"
+                if silent
+                else "positions are now zero"
+            )
         else:
             response.success = loop.set_zero()
-            response.message = "position is now zero" if response.success else "no reply"
+            response.message = (
+                "position is now zero"
+                if response.success
+                else "no reply in the new frame (if driven, faulted and disabled)"
+            )
         return response
 
     def _on_enable(self, request: SetBool.Request, response: SetBool.Response) -> Any:
