@@ -90,9 +90,12 @@ def test_cell_through_the_nodes_matches_the_paper_and_the_core(
     # whatever the driver's loop went without a sample between contact and detection beyond its
     # 1 ms period (under a loaded suite it was seen at 18.7 ms against the core's 7.9)
     assert record.t_feel_s is not None and core.t_feel_s is not None, (record, core)
+    # (a detection before the contact is a false one: under two suites at once it came 78 ms
+    # early, docs/known_issues.md; sample_gap_s then says how the driver's samples went)
+    assert record.t_feel_s > 0.0, ("detected before the contact", record, run.sample_gap_s)
     assert run.sample_gap_s is not None, run
     stalled = max(0.0, run.sample_gap_s - 0.001)
-    assert 0.0 < record.t_feel_s < core.t_feel_s + 0.005 + stalled, (record, core, run)
+    assert record.t_feel_s < core.t_feel_s + 0.005 + stalled, (record, core, run)
     assert record.t_process_s is not None and record.t_process_s >= setup.process_time_s
     # the core at the nodes' own latency gives the same outcome
     latency = run.t_torque_s if run.t_torque_s is not None else record.t_process_s

@@ -75,7 +75,8 @@ class CellRun:
     t_torque_s: float | None = None
     # the longest the driver went without a sample from the ball's first contact to the sample
     # that crossed the threshold (consecutive /joint_setpoints stamps around them): a loaded
-    # machine's stalled loop samples the dented arm that much late, and t_feel grows with it
+    # machine's stalled loop samples the dented arm that much late, and t_feel grows with it.
+    # For a detection before the contact (a false one), over the 0.1 s up to it
     sample_gap_s: float | None = None
 
 
@@ -256,7 +257,13 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
         )
     torque_s = _first_unheld_stamp(setpoints, state.detected_s)
     t_torque = None if torque_s is None or state.detected_s is None else torque_s - state.detected_s
-    gap = _largest_gap(setpoints, contact_s, state.detected_s)
+    detected_s = state.detected_s
+    gap = (
+        None
+        if contact_s is None or detected_s is None
+        # (a detection before the contact, a false one: the samples' steps up to it)
+        else _largest_gap(setpoints, min(contact_s, detected_s - 0.1), max(contact_s, detected_s))
+    )
     return CellRun(fc.record(state, contact_s, exit_s), e_s, noise, min(rates), t_torque, gap)
 
 
