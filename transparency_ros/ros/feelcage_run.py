@@ -107,6 +107,11 @@ def node_parameters(actuator: str, ball: str, setup: FeelCageSetup) -> dict[str,
             "k_s": setup.k_s_nm_per_rad, "k_d": 0.0, "publish_rate_hz": setup.sample_rate_hz,
             "position_min_rad": -1000.0, "position_max_rad": 1000.0,
             "velocity_limit_rad_s": 1000.0, "torque_limit_nm": peak, "command_timeout_s": 1.0,
+            # the simulated controller's own watchdog at 1 s: four Python processes at 1 kHz on
+            # two cores can stall the driver's for over the default 0.1 s, which latches a
+            # moteus (and now faults the driver, as it should on a real one); the cell is about
+            # contact timing, and a host that died would still stop it within 1 s
+            "moteus.watchdog_timeout_s": 1.0,
         },
         "contact_estimator": {
             "k_s": setup.k_s_nm_per_rad, "contact_onset_rad": 9.9, "contact_release_rad": 9.8,
