@@ -174,7 +174,8 @@ def test_a_silent_motor_trips_its_own_watchdog(robot: Robot) -> None:
     count = len(robot.samples)
     time.sleep(0.1)
     assert len(robot.samples) > count + 10
-    assert robot.samples[-1].indices == (0, 2), "the others keep being published"
+    # (a loaded run's newest sample can miss a late reply: the others, within a few samples)
+    assert wait_for(lambda: robot.samples[-1].indices == (0, 2)), "the others keep being published"
     # and once the silent one answers again, it is published again, still disabled
     sim.silence(device, False)
     assert wait_for(lambda: robot.samples[-1].indices == (0, 1, 2))
