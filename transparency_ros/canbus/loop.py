@@ -334,8 +334,7 @@ class ControlLoop(PeriodicLoop):
                     # the device stopped driving on its own: the driver stops too (disabled,
                     # FAULT until re-enabled), not commanding a motor that does not follow
                     reason = f"the device reports: {feedback.device_fault}"
-                    self.core.fault(reason)
-                    self.client.send(self.client.protocol.disable_frames())
+                    self.emergency_stop(reason)
             elif command is not None and self.core.on_missed_reply(  # (a motor not driven
                 sent_s,
                 self.min_unanswered(self.core),  # has no watchdog: nothing to disable)

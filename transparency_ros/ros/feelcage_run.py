@@ -38,7 +38,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from transparency_ros.core import feel_cage as fc
-from transparency_ros.core.cdr import decode_joint_state
+from transparency_ros.core.cdr import JointStateFields, decode_joint_state
 from transparency_ros.core.config import get_actuator
 from transparency_ros.core.errors import TransparencyError
 from transparency_ros.core.feel_cage_config import FeelCageSetup
@@ -260,37 +260,35 @@ def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[],
         state = fc.BehaviorState(
             fc.Phase.LOST, 0.0, 0.0, state.detected_s, state.act_start_s, state.done_s
         )
-    torque_s = _first_unheld_stamp(setpoints, state.detected_s)
-    t_torque = None if torque_s is None or state.detected_s is None else torque_s - state.detected_s
+    decoded = [decode_joint_state(data) for data in setpoints]  # (once, for both below)
     detected_s = state.detected_s
+    torque_s = _first_unheld_stamp(decoded, detected_s)
+    t_torque = None if torque_s is None or detected_s is None else torque_s - detected_s
     gap = (
         None
         if contact_s is None or detected_s is None
         # (a detection before the contact, a false one: the samples' steps up to it)
-        else _largest_gap(setpoints, min(contact_s, detected_s - 0.1), max(contact_s, detected_s))
+        else _largest_gap(decoded, min(contact_s, detected_s - 0.1), max(contact_s, detected_s))
     )
     return CellRun(fc.record(state, contact_s, exit_s), e_s, noise, min(rates), t_torque, gap)
 
 
-def _largest_gap(setpoints: list[bytes], from_s: float | None, to_s: float | None
-                 ) -> float | None:  # fmt: skip
+def _largest_gap(setpoints: list[JointStateFields], from_s: float, to_s: float) -> float | None:
     """The largest step between consecutive /joint_setpoints stamps that spans any of
-    [``from_s``, ``to_s``] (None: either end unknown, or no step spans it)."""
-    if from_s is None or to_s is None:
-        return None
-    stamps = sorted(decode_joint_state(data).stamp_s for data in setpoints)
+    [``from_s``, ``to_s``] (None: no step spans it)."""
+    stamps = sorted(fields.stamp_s for fields in setpoints)
     steps = [b - a for a, b in itertools.pairwise(stamps) if b > from_s and a < to_s]
     return max(steps, default=None)
 
 
-def _first_unheld_stamp(setpoints: list[bytes], after_s: float | None) -> float | None:
+def _first_unheld_stamp(setpoints: list[JointStateFields], after_s: float | None
+                        ) -> float | None:  # fmt: skip
     """The stamp of the first /joint_setpoints sample from ``after_s`` on whose motor was not
     held at a position and driven by a torque (the act command: position NaN and a feed-forward
     torque, messages.setpoint_of; a command timeout's damping has no feed-forward)."""
     if after_s is None:
         return None
-    for data in setpoints:
-        fields = decode_joint_state(data)
+    for fields in setpoints:
         stamp_s = fields.stamp_s
         unheld = fields.position and math.isnan(fields.position[0]) and fields.effort[0] != 0.0
         if stamp_s >= after_s and unheld:
