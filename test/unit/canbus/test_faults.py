@@ -18,33 +18,22 @@ import can
 import pytest
 from can.interfaces.virtual import VirtualBus
 
-from test.unit.canbus.test_loop_with_sim import EXIT_EVENT, make, wait_for
-from transparency_ros.canbus.client import ActuatorClient, BusSettings
-from transparency_ros.canbus.loop import ControlLoop
+from test.unit.canbus.test_loop_with_sim import EXIT_EVENT, close_loop, make, open_loop, wait_for
 from transparency_ros.canbus.protocol import Feedback, Frame
-from transparency_ros.canbus.sim_device import SimulatedActuator
-from transparency_ros.core.actuator_physics import ActuatorPhysics, PhysicsParams
-from transparency_ros.core.config import get_actuator
-from transparency_ros.core.driver import DriverCore, DriverMode, DriverSettings
+from transparency_ros.core.driver import DriverMode
 
-_channels = itertools.count()
 SILENCE_S = 0.008  # 4 cycles at 500 Hz
 
 
 class Rig:
     def __init__(self, name: str, rate_hz: float = 500.0, silence_s: float = SILENCE_S) -> None:
         self.name = name
-        protocol, personality = make(name)
-        settings = BusSettings(channel=f"fault_test_{next(_channels)}", fd=protocol.is_fd)
-        physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
-        self.sim = SimulatedActuator(physics, personality, settings).start()
-        self.client = ActuatorClient(protocol, settings.open())
-        core = DriverCore(DriverSettings(reply_silence_s=silence_s))
-        self.loop = ControlLoop(self.client, core, rate_hz=rate_hz, reply_timeout_s=0.0015)
+        self.loop, self.sim, self.faults = open_loop(
+            *make(name), silence_s=silence_s, rate_hz=rate_hz
+        )
+        self.client = self.loop.client
         self.published: list[float] = []
-        self.faults: list[str] = []
         self.loop.on_sample = self._on_sample
-        self.loop.on_fault = self.faults.append
 
     def _on_sample(self, sample: Feedback, at_s: float, _applied: object) -> None:
         self.published.append(at_s)
@@ -58,10 +47,7 @@ class Rig:
         return self.sim.events[EXIT_EVENT[self.name]]
 
     def close(self) -> None:
-        self.loop.stop()
-        self.loop.disable()
-        self.client.close()
-        self.sim.stop()
+        close_loop(self.loop, self.sim)
 
 
 PROTOCOLS = ["mit", "odrive", "moteus"]
@@ -204,18 +190,13 @@ class _BusOffAfter(VirtualBus):
 
 @pytest.mark.parametrize("name", PROTOCOLS)
 def test_bus_off_trips_the_fault_and_the_motor_recovers_when_the_bus_returns(name: str) -> None:
-    protocol, personality = make(name)
-    settings = BusSettings(channel=f"fault_test_{next(_channels)}", fd=protocol.is_fd)
-    physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
-    sim = SimulatedActuator(physics, personality, settings).start()
-    bus = _BusOffAfter(channel=settings.channel, fd=protocol.is_fd)
-    client = ActuatorClient(protocol, bus)
     # (the driver's default silence, 0.1 s: at 8 ms a stall of the simulator's thread under a
     # loaded suite tripped the reply watchdog before the bus went down, 9 replies late)
-    core = DriverCore(DriverSettings(reply_silence_s=0.1))
-    loop = ControlLoop(client, core, rate_hz=500.0, reply_timeout_s=0.0015)
-    faults: list[str] = []
-    loop.on_fault = faults.append
+    loop, sim, faults = open_loop(
+        *make(name), bus=lambda s: _BusOffAfter(channel=s.channel, fd=s.fd)
+    )
+    client, core, bus = loop.client, loop.core, loop.client.bus
+    assert isinstance(bus, _BusOffAfter)
     try:
         assert loop.enable() is not None
         loop.start()
@@ -238,8 +219,5 @@ def test_bus_off_trips_the_fault_and_the_motor_recovers_when_the_bus_returns(nam
         loop.start()
         assert wait_for(lambda: c.samples > samples + 20)
     finally:
-        loop.stop()
-        loop.disable()
-        client.close()
-        sim.stop()
+        close_loop(loop, sim)
     assert sim.events[EXIT_EVENT[name]] >= 1 and not sim.personality.is_enabled()

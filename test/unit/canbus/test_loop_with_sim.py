@@ -5,8 +5,9 @@ from __future__ import annotations
 import itertools
 import re
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
+import can
 import pytest
 
 from transparency_ros.canbus.client import ActuatorClient, BusSettings, to_message
@@ -53,24 +54,49 @@ def make(name: str) -> tuple[ActuatorProtocol, Personality]:
     return MoteusProtocol(2, watchdog_timeout_s=RIG_MOTEUS_WATCHDOG_S), MoteusDevice(2)
 
 
-@pytest.fixture(params=["mit", "odrive", "moteus"])
-def rig(request: pytest.FixtureRequest) -> Iterator[tuple[str, ControlLoop, SimulatedActuator]]:
-    name = request.param
-    protocol, personality = make(name)
+def open_loop(
+    protocol: ActuatorProtocol,
+    personality: Personality,
+    *,
+    silence_s: float = 0.1,
+    rate_hz: float = 500.0,
+    bus: Callable[[BusSettings], can.BusABC] = BusSettings.open,
+) -> tuple[ControlLoop, SimulatedActuator, list[str]]:
+    """A control loop and a simulated device (started) on a channel of their own: (loop,
+    device, the loop's fault reasons as they come). ``bus``: the loop's bus on the channel.
+    The driver's default silence, 0.1 s: the simulator answers from a thread of this process,
+    and at 8 ms a stall of it under a loaded run tripped the reply watchdog in tests not about
+    it (and in the silence test before the bus went silent: 9 commands, then polls)."""
     settings = BusSettings(channel=f"loop_test_{next(_channels)}", fd=protocol.is_fd)
     physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
     sim = SimulatedActuator(physics, personality, settings).start()
-    client = ActuatorClient(protocol, settings.open())
-    # the driver's default silence, 0.1 s: the simulator answers from a thread of this process,
-    # and at 8 ms a stall of it under a loaded run tripped the reply watchdog in tests not
-    # about it (and in the silence test before the bus went silent: 9 commands, then polls)
-    core = DriverCore(DriverSettings(reply_silence_s=0.1))
-    loop = ControlLoop(client, core, rate_hz=500.0, reply_timeout_s=0.0015)
-    yield name, loop, sim
+    core = DriverCore(DriverSettings(reply_silence_s=silence_s))
+    loop = ControlLoop(ActuatorClient(protocol, bus(settings)), core, rate_hz=rate_hz,
+                       reply_timeout_s=0.0015)  # fmt: skip
+    faults: list[str] = []
+    loop.on_fault = faults.append
+    return loop, sim, faults
+
+
+def close_loop(loop: ControlLoop, sim: SimulatedActuator) -> None:
     loop.stop()
     loop.disable()
-    client.close()
+    loop.client.close()
     sim.stop()
+
+
+@pytest.fixture(params=["mit", "odrive", "moteus"])
+def rig(request: pytest.FixtureRequest) -> Iterator[tuple[str, ControlLoop, SimulatedActuator]]:
+    loop, sim, _ = open_loop(*make(request.param))
+    yield request.param, loop, sim
+    close_loop(loop, sim)
+
+
+def recorded_faults(loop: ControlLoop) -> list[str]:
+    """The loop's fault reasons from now on."""
+    faults: list[str] = []
+    loop.on_fault = faults.append
+    return faults
 
 
 def wait_for(condition, timeout_s: float = 3.0) -> bool:  # type: ignore[no-untyped-def]
@@ -108,8 +134,7 @@ def test_silent_bus_trips_the_fault_after_the_configured_silence(
 ) -> None:
     name, loop, sim = rig
     assert loop.enable() is not None
-    faults: list[str] = []
-    loop.on_fault = faults.append
+    faults = recorded_faults(loop)
     loop.start()
     assert wait_for(lambda: loop.client.counters.samples > 20)
     assert loop.core.mode is DriverMode.ACTIVE and faults == [], faults
@@ -182,8 +207,7 @@ def test_set_zero_without_an_answer_faults_and_disables(
 ) -> None:
     name, loop, sim = rig
     assert loop.enable() is not None
-    faults: list[str] = []
-    loop.on_fault = faults.append
+    faults = recorded_faults(loop)
     loop.cycle()
     exits_before = sim.events[EXIT_EVENT[name]]
     sim.silence()
@@ -198,35 +222,25 @@ def test_a_device_that_stops_driving_on_its_own_faults_the_driver() -> None:
     its timeout mode and no longer follows; its replies say so. The driver faults and disables
     it (a stop clears the latch) instead of commanding a motor that does not follow; enabling
     again drives it again."""
-    protocol, personality = MoteusProtocol(2, watchdog_timeout_s=0.1), MoteusDevice(2)
-    settings = BusSettings(channel=f"loop_test_{next(_channels)}", fd=True)
-    physics = ActuatorPhysics(PhysicsParams.from_actuator(get_actuator("U10DD")))
-    with SimulatedActuator(physics, personality, settings) as sim:
-        client = ActuatorClient(protocol, settings.open())
-        core = DriverCore(DriverSettings())
-        loop = ControlLoop(client, core, rate_hz=500.0, reply_timeout_s=0.0015)
-        faults: list[str] = []
-        loop.on_fault = faults.append
-        try:
-            assert loop.enable() is not None
-            loop.start()
-            assert wait_for(sim.personality.is_enabled)
-            loop.stop()  # the host stalls past the device's 0.1 s watchdog
-            assert wait_for(lambda: sim.events["watchdog_timeout"] >= 1), sim.events
-            stops = sim.events["mode_stopped"]
-            loop.start()
-            assert wait_for(lambda: loop.core.mode is DriverMode.FAULT), loop.core.status
-            assert faults and "position timeout" in faults[0], faults
-            assert sim.events["ignored_while_latched"] >= 1, sim.events  # commands refused
-            assert wait_for(lambda: sim.events["mode_stopped"] > stops), sim.events  # cleared
-            loop.stop()
-            assert loop.enable() is not None and loop.core.mode is DriverMode.ACTIVE
-            loop.start()
-            assert wait_for(sim.personality.is_enabled), sim.events
-        finally:
-            loop.stop()
-            loop.disable()
-            client.close()
+    loop, sim, faults = open_loop(MoteusProtocol(2, watchdog_timeout_s=0.1), MoteusDevice(2))
+    try:
+        assert loop.enable() is not None
+        loop.start()
+        assert wait_for(sim.personality.is_enabled)
+        loop.stop()  # the host stalls past the device's 0.1 s watchdog
+        assert wait_for(lambda: sim.events["watchdog_timeout"] >= 1), sim.events
+        stops = sim.events["mode_stopped"]
+        loop.start()
+        assert wait_for(lambda: loop.core.mode is DriverMode.FAULT), loop.core.status
+        assert faults and "position timeout" in faults[0], faults
+        assert sim.events["ignored_while_latched"] >= 1, sim.events  # commands refused
+        assert wait_for(lambda: sim.events["mode_stopped"] > stops), sim.events  # cleared
+        loop.stop()
+        assert loop.enable() is not None and loop.core.mode is DriverMode.ACTIVE
+        loop.start()
+        assert wait_for(sim.personality.is_enabled), sim.events
+    finally:
+        close_loop(loop, sim)
 
 
 def test_a_loop_exception_leaves_the_motor_disabled(
