@@ -63,6 +63,18 @@ def test_sweep_contact_act_caged(ros_context: Context) -> None:
         sweep = commands[-1]
         assert sweep.name == ["joint"] and sweep.velocity[0] == pytest.approx(6.283185, rel=1e-6)
         assert sweep.position[0] > 0.2
+        # stamped with the time theta_d was computed for: every sweep command on one line
+        # theta_d = c + theta_d' * stamp (the driver extrapolates from the stamp; a clock read
+        # after computing put them 20-200 urad off it, and a preempted thread much more)
+        first_ns = commands[0].header.stamp.sec * 10**9 + commands[0].header.stamp.nanosec
+        lines = [
+            m.position[0]
+            - m.velocity[0]
+            * (m.header.stamp.sec * 10**9 + m.header.stamp.nanosec - first_ns)
+            * 1e-9
+            for m in commands[:6]
+        ]
+        assert max(lines) - min(lines) < 1e-5, lines  # (float seconds since 1970: 0.24 us)
         # not armed: contacts are ignored
         contact = WrenchStamped()
         contact.header.frame_id = "joint"

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from transparency_ros.core.estimator import EstimatorPipeline
+from transparency_ros.core.estimator import EstimatorPipeline, SampleRejectedError
 from transparency_ros.core.setpoint_join import SetpointJoin, StateSample
 
 MS = 1_000_000
@@ -158,3 +158,21 @@ def test_a_joint_the_driver_did_not_hold_gets_no_estimate() -> None:
     estimates, events = pipeline.sample(1 * MS, ["a", "b"], [5.0, 0.0], [], setpoints)
     assert [e.joint for e in estimates] == ["b"] and events == []  # a's 5 rad is no contact
     assert pipeline.not_driven == 1 and pipeline.samples == 1
+
+
+def test_a_pure_torque_command_leaves_the_joint_without_an_estimate() -> None:
+    """The feel-cage's act phase drives the arm by torque alone (no positions, an effort): the
+    estimator takes it (it was refused, with a warning), and without setpoints the joint gets
+    no estimate from the older position command until the next one, as a NaN setpoint says."""
+    pipeline = EstimatorPipeline()
+    pipeline.command(["a"], [0.0], [])
+    pipeline.command(["a"], [], [], efforts=[-1.5])
+    estimates, events = pipeline.sample(1 * MS, ["a"], [2.0], [])  # 2 rad from the old target
+    assert estimates == [] and events == [] and pipeline.not_driven == 1
+    pipeline.command(["a"], [2.0], [])
+    estimates, _ = pipeline.sample(2 * MS, ["a"], [2.0], [])
+    assert estimates[0].error_rad == 0.0
+    with pytest.raises(SampleRejectedError):  # neither positions nor efforts
+        pipeline.command(["a"], [], [])
+    with pytest.raises(SampleRejectedError):
+        pipeline.command(["a"], [], [], efforts=[math.inf])

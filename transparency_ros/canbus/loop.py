@@ -43,6 +43,11 @@ from transparency_ros.core.histogram import DurationHistogram
 _Answer = tuple[Feedback, float, ImpedanceCommand | None]
 
 
+# a command whose send returned over this share of a period after the time it was computed for
+# is sent again, fresh (PeriodicLoop.is_stale); at most this many frames per motor and cycle
+STALE_COMMAND_SHARE = 0.5
+MAX_COMMAND_SENDS = 3
+
 # a zero's answer and an older reply whose readings differ by less than this need no telling
 # apart: holding either moves the motor by less
 ZERO_SAME_FRAME_RAD = 0.01
@@ -126,6 +131,20 @@ class PeriodicLoop:
         self.cycles = 0
         self.overruns = 0
         self.lateness = DurationHistogram()  # cycle start - its deadline (the host's stalls)
+        self.resent_commands = 0  # commands sent again because the first left stale
+
+    def is_stale(self, computed_s: float, left_s: float, sends: int) -> bool:
+        """Whether a command computed for ``computed_s`` whose send returned at ``left_s`` left
+        stale and is to be sent again (counted), fresh: more than STALE_COMMAND_SHARE of a
+        period late, at most MAX_COMMAND_SENDS frames per cycle. A host stalled between
+        computing a command and sending it would otherwise hand the device a setpoint that old:
+        a moteus (and its simulation) starts its position ramp from the setpoint it receives, so
+        17 ms of stall braked a 1 rev/s sweep by 0.1 rad, the error then rose by 10 mrad for tens
+        of ms and the feel-cage cell measured e_s that much too high (and missed the ball)."""
+        if left_s - computed_s <= STALE_COMMAND_SHARE * self.period_s or sends >= MAX_COMMAND_SENDS:
+            return False
+        self.resent_commands += 1
+        return True
 
     def min_unanswered(self, core: DriverCore) -> int:
         """Requests a silent motor must have left unanswered before its watchdog trips: half of
@@ -229,6 +248,7 @@ class ControlLoop(PeriodicLoop):
         self.on_sample, self.on_fault = on_sample, on_fault
         self._last_sample_s = -math.inf
         self._last_rx_wall_s = -math.inf  # bus time of the newest reply handed on
+        self.superseded_replies = 0  # replies to commands sent again fresh (is_stale)
         # the last cycle's command and when it was sent (the late replies' request)
         self._previous: tuple[ImpedanceCommand | None, float] = (None, 0.0)
 
@@ -304,25 +324,20 @@ class ControlLoop(PeriodicLoop):
         samples: list[_Answer] = []  # (sample, its time, its command) in time order
         reason = ""
         with self.lock:
-            sent_s = self.clock()
-            sent_wall_s = WALL(sent_s)
+            ref_s = self.clock()
+            ref_wall_s = WALL(ref_s)
             for queued, queued_rx in self.client.drain():
-                self._late(queued, queued_rx, sent_s, sent_wall_s, samples)
-            command = self.core.command(sent_s)
-            protocol = self.client.protocol
-            self.client.send(
-                protocol.query_frames()
-                if command is None
-                else protocol.command_frames(command, self.client.last_feedback)
-            )
-            deadline = sent_s + self.reply_timeout_s
-            while True:
-                feedback = self.client.receive(deadline - self.clock())
-                rx = self.client.last_rx_wall_s
-                if feedback is None or rx is None or rx >= sent_wall_s:
-                    break
-                self._late(feedback, rx, sent_s, sent_wall_s, samples)  # an older request's
+                self._late(queued, queued_rx, ref_s, ref_wall_s, samples)
+            command, sent_s, first_s, sends = self._send_command()
+            sent_wall_s, first_wall_s = WALL(sent_s), WALL(first_s)
+
+            def late(reply: Feedback, rx_wall_s: float) -> None:  # an older request's reply
+                self._late(reply, rx_wall_s, ref_s, ref_wall_s, samples)
+
+            feedback, rx = self._answer(sent_s + self.reply_timeout_s, first_wall_s, sends, late)
             if feedback is not None:
+                # (negative for the answer to a stale send, measured before the fresh one left:
+                # its own time, with theta_d of the same trajectory then)
                 latency = 0.0 if rx is None else min(rx - sent_wall_s, self.period_s)
                 samples.append(
                     (feedback, sent_s + latency, command_at(command, sent_s, sent_s + latency))
@@ -350,6 +365,50 @@ class ControlLoop(PeriodicLoop):
             self.on_sample(sample, at_s, applied)
         if reason:
             self.on_fault(reason)
+
+    def _answer(
+        self,
+        deadline_s: float,
+        first_wall_s: float,
+        sends: int,
+        late: Callable[[Feedback, float], None],
+    ) -> tuple[Feedback | None, float | None]:
+        """This cycle's reply and its bus time, waiting until ``deadline_s``: the last of up to
+        ``sends`` replies stamped from the first send on (with a command sent again fresh, the
+        earlier ones answer the stale sends: counted superseded). Replies stamped before it
+        answer older requests: to ``late``."""
+        answer: tuple[Feedback | None, float | None] = (None, None)
+        answered = 0
+        while answered < sends:
+            reply = self.client.receive(deadline_s - self.clock())
+            if reply is None:
+                break
+            rx = self.client.last_rx_wall_s
+            if rx is not None and rx < first_wall_s:
+                late(reply, rx)
+                continue
+            answer, answered = (reply, rx), answered + 1
+        self.superseded_replies += max(0, answered - 1)
+        return answer
+
+    def _send_command(self) -> tuple[ImpedanceCommand | None, float, float, int]:
+        """Compute this cycle's command and send it, again if it left stale (see
+        :meth:`PeriodicLoop.is_stale`): (the command sent last, the time it was computed for,
+        the first one's, frames sent)."""
+        protocol = self.client.protocol
+        first_s = now_s = self.clock()
+        sends = 0
+        while True:
+            command = self.core.command(now_s)
+            sends += 1
+            if command is None:  # a poll: nothing to go stale
+                self.client.send(protocol.query_frames())
+                return None, now_s, first_s, sends
+            self.client.send(protocol.command_frames(command, self.client.last_feedback))
+            left_s = self.clock()
+            if not self.is_stale(now_s, left_s, sends):
+                return command, now_s, first_s, sends
+            now_s = left_s
 
     def emergency_stop(self, reason: str) -> None:
         self.core.fault(reason)

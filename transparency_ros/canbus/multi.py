@@ -53,6 +53,7 @@ class Motor:
     samples: int = 0
     late: int = 0
     duplicates: int = 0
+    superseded: int = 0  # replies to commands sent again fresh within their cycle
 
 
 @dataclass(frozen=True)
@@ -91,6 +92,12 @@ class _Router:
 @dataclass
 class _Collected:
     replies: dict[int, tuple[Feedback, float | None]] = field(default_factory=dict)
+    # motor index -> frames sent it this cycle that ask a reply (default 1), replies taken
+    expected: dict[int, int] = field(default_factory=dict)
+    counts: dict[int, int] = field(default_factory=dict)
+
+    def owes(self, index: int) -> bool:
+        return self.counts.get(index, 0) < self.expected.get(index, 1)
 
 
 class MultiControlLoop(PeriodicLoop):
@@ -145,15 +152,18 @@ class MultiControlLoop(PeriodicLoop):
         self.clients[self.motors[index].bus].send(frames)
 
     def _collect(self, wanted: set[int], deadline_s: float, since_wall_s: float,
-                 answers: Callable[[int, Feedback], bool] | None = None) -> _Collected:  # fmt: skip
+                 answers: Callable[[int, Feedback], bool] | None = None,
+                 expected: dict[int, int] | None = None) -> _Collected:  # fmt: skip
         """Read replies until every motor in ``wanted`` answered or ``deadline_s``. Replies
         stamped before ``since_wall_s``, or refused by ``answers`` (motor index, reply), answer
-        older requests: counted late, state kept.
+        older requests: counted late, state kept. ``expected``: frames sent a motor this cycle
+        (default 1; more when commands went again fresh): it answers each, in order, and the
+        last is taken, the earlier counted superseded.
         With several buses, the wait blocks on a bus that still owes replies, in short slices
         (python-can has no portable wait on several buses), and the others are read as they are."""
-        got = _Collected()
+        got = _Collected(expected=expected or {})
         while True:
-            owing = {self.motors[i].bus for i in wanted - got.replies.keys()}
+            owing = {self.motors[i].bus for i in wanted if got.owes(i)}
             remaining = deadline_s - self.clock()
             if not owing or remaining <= 0:
                 break
@@ -181,10 +191,13 @@ class MultiControlLoop(PeriodicLoop):
         motor.core.on_feedback(feedback.position_rad, self.clock())
         if rx is not None and rx < since_wall_s:
             motor.late += 1
-        elif index in got.replies:
+        elif index in got.replies and not got.owes(index):
             motor.duplicates += 1
         else:
+            if index in got.replies:
+                motor.superseded += 1  # the answer to a stale send: the fresh one's follows
             got.replies[index] = (feedback, rx)
+            got.counts[index] = got.counts.get(index, 0) + 1
 
     def _drain(self, since_wall_s: float) -> None:
         for client, router in zip(self.clients, self.routers, strict=True):
@@ -282,19 +295,21 @@ class MultiControlLoop(PeriodicLoop):
         """One cycle for all motors (the thread runs it every period; tests may call it)."""
         faults: list[str] = []
         with self.lock:
-            sent_s = self.clock()
-            sent_wall_s = WALL(sent_s)
-            self._drain(sent_wall_s)
-            driven: set[int] = set()
+            self._drain(WALL(self.clock()))
+            first_s = sent_s = self.clock()
             commands = [motor.core.command(sent_s) for motor in self.motors]
-            for i, (motor, command) in enumerate(zip(self.motors, commands, strict=True)):
-                if command is None:  # not driven (faulted, disabled): polled, still published
-                    self._send(i, motor.protocol.query_frames())
-                else:
-                    self._send(i, motor.protocol.command_frames(command, motor.last_feedback))
-                    driven.add(i)
+            driven = self._send_commands(commands, polls=True)
+            expected = dict.fromkeys(range(len(self.motors)), 1)
+            while driven and self.is_stale(sent_s, self.clock(), max(expected.values())):
+                sent_s = self.clock()  # (sent again, fresh)
+                commands = [motor.core.command(sent_s) for motor in self.motors]
+                driven = self._send_commands(commands, polls=False)
+                for i in driven:
+                    expected[i] += 1
+            sent_wall_s = WALL(sent_s)
             wanted = set(range(len(self.motors)))
-            got = self._collect(wanted, sent_s + self.reply_timeout_s, sent_wall_s)
+            got = self._collect(wanted, sent_s + self.reply_timeout_s, WALL(first_s),
+                                expected=expected)  # fmt: skip
             tripped = [i for i in sorted(driven - got.replies.keys())
                        if self.motors[i].core.on_missed_reply(
                            sent_s, self.min_unanswered(self.motors[i].core))]  # fmt: skip
@@ -313,6 +328,18 @@ class MultiControlLoop(PeriodicLoop):
         for reason in faults:
             self.on_fault(reason)
 
+    def _send_commands(self, commands: list[ImpedanceCommand | None], *, polls: bool) -> set[int]:
+        """Send each driven motor its command and (``polls``) poll the others (faulted,
+        disabled: still published); the driven motors' indices."""
+        driven: set[int] = set()
+        for i, (motor, command) in enumerate(zip(self.motors, commands, strict=True)):
+            if command is not None:
+                self._send(i, motor.protocol.command_frames(command, motor.last_feedback))
+                driven.add(i)
+            elif polls:
+                self._send(i, motor.protocol.query_frames())
+        return driven
+
     def _sample(self, got: _Collected, sent_s: float, sent_wall_s: float,
                 commands: list[ImpedanceCommand | None]) -> RobotSample | None:  # fmt: skip
         if not got.replies:
@@ -321,7 +348,8 @@ class MultiControlLoop(PeriodicLoop):
         times = []
         for i in indices:
             rx = got.replies[i][1]
-            latency = 0.0 if rx is None else min(max(rx - sent_wall_s, 0.0), self.period_s)
+            # (negative for an answer to a stale send, its fresh one's missing: its own time)
+            latency = 0.0 if rx is None else min(rx - sent_wall_s, self.period_s)
             times.append(sent_s + latency)
             self.motors[i].samples += 1
         stamp = sum(times) / len(times)

@@ -100,6 +100,8 @@ def _run_cells(
             print(f"[{done}/{total}] {ball} / {name} through the nodes ...", file=sys.stderr,
                   flush=True)  # fmt: skip
             cell = run_cell(name, ball, setup)
+            for line in cell.node_warnings:  # a stalled loop, a device fault: beside its cell
+                print(f"  {line}", file=sys.stderr)
             records[(ball, name)] = cell.record
             torque[(ball, name)] = cell.t_torque_s
             e_s[name] = max(e_s.get(name, 0.0), cell.steady_error_rad)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import operator
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum
 from functools import cached_property
@@ -384,17 +385,25 @@ class EstimatorPipeline:
             raise self.reject("unknown_joint", f"{unknown} not in {sorted(self.joints)}")
 
     def command(self, names: list[str], positions: list[float], velocities: list[float],
-                stamp_ns: int | None = None) -> None:  # fmt: skip
-        """A /joint_commands message: theta_d (and theta_d') per joint, stamped [ns] or not."""
+                stamp_ns: int | None = None, efforts: Sequence[float] = ()) -> None:  # fmt: skip
+        """A /joint_commands message: theta_d (and theta_d') per joint, stamped [ns] or not.
+        Without positions but with ``efforts`` it is a pure torque command (the driver drives
+        the joint by torque alone, as the feel-cage's act phase does): the joints are then not
+        held at a position and get no estimate, as a NaN setpoint says, until a position
+        command."""
         if stamp_ns is not None:
             stamp_ns = operator.index(stamp_ns)  # an int: a float stamp is a caller's bug
-        self._check_arrays(names, {"positions": positions, "velocities": velocities})
-        if not positions:
-            raise self.reject("no_position", "a command needs positions")
-        values = list(positions) + list(velocities)
+        arrays = {"positions": positions, "velocities": velocities, "efforts": list(efforts)}
+        self._check_arrays(names, arrays)
+        if not positions and not efforts:
+            raise self.reject("no_position", "a command needs positions (or efforts: torque)")
+        values = list(positions) + list(velocities) + list(efforts)
         if not all(math.isfinite(v) for v in values):
             raise self.reject("not_finite", "NaN or inf in a command")
         for i, name in enumerate(names):
+            if not positions:  # pure torque: not held
+                self._commands[name] = (math.nan, 0.0, stamp_ns)
+                continue
             self._commands[name] = (positions[i], velocities[i] if velocities else 0.0, stamp_ns)
 
     def _commanded(self, name: str, stamp_ns: int) -> tuple[float, float] | None:
@@ -412,7 +421,7 @@ class EstimatorPipeline:
         if setpoints is None or name not in setpoints:
             return commanded or (self.default_theta_d_rad, 0.0)
         theta_d, theta_d_dot = setpoints[name]
-        if commanded is not None and not math.isnan(theta_d):
+        if commanded is not None and not (math.isnan(theta_d) or math.isnan(commanded[0])):
             self.theta_d_gap[name] = abs(commanded[0] - theta_d)
         return theta_d, theta_d_dot
 

@@ -259,11 +259,8 @@ class ContactEstimatorNode(Node):
                 list(msg.velocity),
                 stamp_ns if stamp_ns > 0 else None,
             )
-            with self.lock:
-                if isinstance(self.pipeline, (ObserverPipeline, AwaitingModel)):
-                    self.pipeline.command(*args, efforts=list(msg.effort))
-                else:
-                    self.pipeline.command(*args)
+            with self.lock:  # (an empty position with efforts: a pure torque command)
+                self.pipeline.command(*args, efforts=list(msg.effort))
         except SampleRejectedError as err:
             self._warn(f"rejected /joint_commands: {err}")
 

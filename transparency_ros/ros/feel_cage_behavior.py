@@ -37,6 +37,7 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
+from rclpy.time import Time
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
@@ -257,16 +258,18 @@ class FeelCageBehaviorNode(Node):
             type(command) is not type(self._last_command)
             or now - self._last_publish_s >= self._refresh_s
         ):
-            self._publish_command(command)
+            self._publish_command(command, now)
             self._last_command, self._last_publish_s = command, now
         if self.state.phase is not before:
             self._publish_phase()
             if self.state.phase in (fc.Phase.CAGED, fc.Phase.LOST):
                 self._publish_trial()
 
-    def _publish_command(self, command: fc.Command) -> None:
+    def _publish_command(self, command: fc.Command, now_s: float) -> None:
+        """Stamped with the time theta_d was computed for (the driver extrapolates from the
+        stamp: a later clock reading, after this thread was preempted, would put it behind)."""
         msg = JointState(name=[self.values["joint_name"]])
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = Time(nanoseconds=round(now_s * 1e9)).to_msg()
         if isinstance(command, fc.Sweep):
             msg.position, msg.velocity = [command.position_rad], [command.velocity_rad_s]
         elif isinstance(command, fc.Torque):

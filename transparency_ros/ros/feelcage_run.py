@@ -25,7 +25,7 @@ import subprocess
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import Parameter as ParameterMsg
@@ -78,6 +78,9 @@ class CellRun:
     # machine's stalled loop samples the dented arm that much late, and t_feel grows with it.
     # For a detection before the contact (a false one), over the 0.1 s up to it
     sample_gap_s: float | None = None
+    # the nodes' warnings and errors during the cell ("node: line"), for whoever reads a
+    # surprising record: a stalled loop, a device fault, a refused parameter
+    node_warnings: tuple[str, ...] = ()
 
 
 def _double(name: str, value: float) -> ParameterMsg:
@@ -133,22 +136,54 @@ def run_cell(
     logs: dict[str, str] = {}
     domain = pick_domain_id()
     try:
-        for name, values in params.items():
-            if params_file:
-                extra = ["--params-file", params_file]
-                procs[name] = start_node(name, {}, extra=extra, domain_id=domain)
-            else:
-                procs[name] = start_node(name, values, domain_id=domain)
-        listener = Listener("feelcage_runner")
-        with listener as node:
-            return _trial(node, setup, settle, lambda: first_exited(procs) or listener.failure())
-    finally:
-        for name, proc in procs.items():
-            logs[name] = stop_node(proc)
-        release_domain_id(domain)
-        tail = driver_left_motor_enabled(logs.get("actuator_driver", ""))
-        if tail:
-            raise FeelCageRunError(f"actuator_driver did not report a disabled motor:\n{tail}")
+        try:
+            for name, values in params.items():
+                if params_file:
+                    extra = ["--params-file", params_file]
+                    procs[name] = start_node(name, {}, extra=extra, domain_id=domain)
+                else:
+                    procs[name] = start_node(name, values, domain_id=domain)
+            listener = Listener("feelcage_runner")
+
+            def died() -> str | None:
+                return first_exited(procs) or listener.failure()
+
+            with listener as node:
+                run = _trial(node, setup, settle, died)
+        finally:
+            for name, proc in procs.items():
+                logs[name] = stop_node(proc)
+            release_domain_id(domain)
+            tail = driver_left_motor_enabled(logs.get("actuator_driver", ""))
+            if tail:
+                raise FeelCageRunError(f"actuator_driver did not report a disabled motor:\n{tail}")
+    except FeelCageRunError as error:  # with what the nodes said about it
+        raise FeelCageRunError(_with_warnings(str(error), logs)) from error
+    return replace(run, node_warnings=node_warnings(logs))
+
+
+# the levels rclpy's console output names, and Python's own
+_NOTABLE = ("[WARN]", "[ERROR]", "[FATAL]", "Traceback", "Error:")
+MAX_WARNINGS = 20
+
+
+def node_warnings(logs: dict[str, str]) -> tuple[str, ...]:
+    """The nodes' warning and error lines, "node: line", the first MAX_WARNINGS of them (and a
+    count of the rest)."""
+    lines = [
+        f"{name}: {line.strip()}"
+        for name, log in logs.items()
+        for line in log.splitlines()
+        if any(mark in line for mark in _NOTABLE)
+    ]
+    if len(lines) > MAX_WARNINGS:
+        lines = [*lines[:MAX_WARNINGS], f"... and {len(lines) - MAX_WARNINGS} more"]
+    return tuple(lines)
+
+
+def _with_warnings(message: str, logs: dict[str, str]) -> str:
+    notes = node_warnings(logs)
+    return message + ("\nthe nodes warned:\n  " + "\n  ".join(notes) if notes else "")
 
 
 def _trial(node: Node, setup: FeelCageSetup, settle_s: float, died: Callable[[], str | None]

@@ -27,7 +27,7 @@ from transparency_ros.canbus.sim_device import (
     Personality,
     SimulatedActuator,
 )
-from transparency_ros.core.actuator_physics import ActuatorPhysics, PhysicsParams
+from transparency_ros.core.actuator_physics import ActuatorPhysics, ImpedanceLaw, PhysicsParams
 from transparency_ros.core.config import get_actuator
 from transparency_ros.core.driver import (
     DriverCore,
@@ -334,3 +334,58 @@ def test_a_late_reply_is_published_at_its_bus_time_not_taken_for_the_next_answer
     finally:
         client.close()
         device_bus.shutdown()
+
+
+class StallingSend:
+    """A virtual bus whose next send waits ``stall_s`` before the frame goes on the bus: the
+    host stalled between computing a command and sending it (a preempted thread)."""
+
+    def __init__(self) -> None:
+        self.stalls: list[float] = []
+
+    def open(self, settings: BusSettings) -> can.BusABC:
+        return self.wrap(settings.open())
+
+    def wrap(self, bus: can.BusABC) -> can.BusABC:
+        send = bus.send
+
+        def stalling(msg: can.Message, timeout: float | None = None) -> None:
+            if self.stalls:
+                time.sleep(self.stalls.pop())
+            send(msg, timeout)
+
+        bus.send = stalling  # type: ignore[method-assign]
+        return bus
+
+
+@pytest.mark.parametrize("name", ["moteus", "mit"])
+def test_a_command_that_left_stale_is_sent_again_fresh(name: str) -> None:
+    """A host stalled 20 ms between computing a sweep command and sending it: the device would
+    take a setpoint 20 ms old (0.13 rad behind at 1 rev/s; a moteus ramps on from it, braking the
+    arm). The loop sees its send return late and sends the command again for now: the device
+    ends up with the fresh setpoint, and the sample carries the command sent last."""
+    stalling = StallingSend()
+    loop, sim, faults = open_loop(*make(name), bus=stalling.open)
+    applied: list[ImpedanceCommand | None] = []
+    loop.on_sample = lambda _fb, _at, command: applied.append(command)
+    speed = 2 * 3.141592653589793
+    try:
+        assert loop.enable() is not None
+        start_s = time.monotonic()
+        with loop.lock:
+            loop.core.set_target(JointTarget(0.0, speed), start_s)
+        commands = sim.events[COMMAND_EVENT[name]]
+        stalling.stalls.append(0.02)
+        loop.cycle()
+        assert loop.resent_commands == 1
+        assert wait_for(lambda: sim.events[COMMAND_EVENT[name]] >= commands + 2), sim.events
+        # the device's setpoint is the fresh one: at least 20 ms of the ramp past the start
+        with sim.lock:
+            law = sim.personality.drive
+        law = getattr(law, "law", law)  # (MIT's, evaluated in its zeroed frame)
+        assert isinstance(law, ImpedanceLaw)
+        assert law.position_rad >= speed * 0.02, law
+        assert applied and applied[-1] is not None and applied[-1].position_rad >= speed * 0.02
+        assert faults == []
+    finally:
+        close_loop(loop, sim)

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import pytest
 
+from test.unit.canbus.test_loop_with_sim import StallingSend
 from transparency_ros.canbus.client import BusSettings
 from transparency_ros.canbus.multi import Motor, MultiControlLoop, RobotSample
 from transparency_ros.canbus.protocol import (
@@ -282,3 +283,26 @@ def test_bad_configurations_are_refused() -> None:
                              reply_timeout_s=1e-3)  # fmt: skip
     finally:
         bus.shutdown()
+
+
+@pytest.mark.parametrize("robot", [("moteus", [1, 2], 1, "all")], indirect=True)
+def test_commands_that_left_stale_are_sent_again_fresh(robot: Robot) -> None:
+    """The host stalled 20 ms sending the first motor's sweep command (canbus test_loop_with_sim
+    has the single-motor case): the loop sends every driven motor its command again, for now;
+    the replies to the stale ones are counted superseded, and the sample carries the fresh."""
+    loop = robot.loop
+    stalling = StallingSend()
+    stalling.wrap(loop.clients[0].bus)
+    speed = 6.283
+    assert loop.enable() == []
+    with loop.lock:
+        for motor in loop.motors:
+            motor.core.set_target(JointTarget(0.0, speed), time.monotonic())
+    stalling.stalls.append(0.02)
+    loop.cycle()
+    assert loop.resent_commands == 1
+    assert robot.samples, "no sample"
+    commands = robot.samples[-1].commands
+    assert all(c is not None and c.position_rad >= speed * 0.02 for c in commands), commands
+    assert [m.superseded for m in loop.motors] == [1, 1], loop.motors
+    assert robot.faults == []

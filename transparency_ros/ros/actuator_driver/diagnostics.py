@@ -58,6 +58,7 @@ def driver_status(
             timeouts=s.missed_replies_total,
             late_replies=c.late,
             duplicate_replies=c.duplicates,
+            superseded_replies=loop.superseded_replies if loop is not None else 0,
             malformed=c.malformed,
             other_frames=c.other,
             last_bus_error=c.last_error,
@@ -112,6 +113,8 @@ def _loop_report(loop: PeriodicLoop) -> dict[str, Any]:
         # how late cycles started (this computer's stalls), since start
         "cycle_late_p99_us": f"{loop.lateness.percentile(99) * 1e6:.0f}",
         "cycle_late_max_ms": f"{loop.lateness.max_s * 1e3:.1f}",
+        # commands that left over half a period after their time, sent again fresh
+        "commands_resent": loop.resent_commands,
     }
 
 
@@ -128,7 +131,8 @@ def robot_statuses(
         )
         status.level, status.message = _level(motor.core, True, lambda: None)
         report = _core_report(motor.core, values["interface"], spec.channel)
-        report.update(samples=motor.samples, late_replies=motor.late, duplicates=motor.duplicates)
+        report.update(samples=motor.samples, late_replies=motor.late, duplicates=motor.duplicates,
+                      superseded_replies=motor.superseded)  # fmt: skip
         status.values = [KeyValue(key=k, value=str(v)) for k, v in report.items()]
         statuses.append(status)
     worst = max((s.level for s in statuses), key=ord)
