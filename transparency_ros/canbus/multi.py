@@ -296,18 +296,13 @@ class MultiControlLoop(PeriodicLoop):
         faults: list[str] = []
         with self.lock:
             self._drain(WALL(self.clock()))
-            first_s = sent_s = self.clock()
-            commands = [motor.core.command(sent_s) for motor in self.motors]
-            driven = self._send_commands(commands, polls=True)
-            expected = dict.fromkeys(range(len(self.motors)), 1)
-            while driven and self.is_stale(sent_s, self.clock(), max(expected.values())):
-                sent_s = self.clock()  # (sent again, fresh)
-                commands = [motor.core.command(sent_s) for motor in self.motors]
-                driven = self._send_commands(commands, polls=False)
-                for i in driven:
-                    expected[i] += 1
-            sent_wall_s = WALL(sent_s)
+            first_s = self.clock()
+            sent = [self._send_fresh(i) for i in range(len(self.motors))]
+            commands = [command for command, _, _ in sent]
+            driven = {i for i, command in enumerate(commands) if command is not None}
+            sent_s = sent[-1][1]  # the last command's time: the wait runs from it
             wanted = set(range(len(self.motors)))
+            expected = {i: sends for i, (_, _, sends) in enumerate(sent)}
             got = self._collect(wanted, sent_s + self.reply_timeout_s, WALL(first_s),
                                 expected=expected)  # fmt: skip
             tripped = [i for i in sorted(driven - got.replies.keys())
@@ -322,34 +317,43 @@ class MultiControlLoop(PeriodicLoop):
             faults = [f"{self.motors[i].name}: {self.motors[i].core.status.fault_reason}"
                       for i in tripped]  # fmt: skip
             self._trip(tripped)
-            sample = self._sample(got, sent_s, sent_wall_s, commands)
+            sample = self._sample(got, sent)
         if sample is not None:
             self.on_sample(sample)
         for reason in faults:
             self.on_fault(reason)
 
-    def _send_commands(self, commands: list[ImpedanceCommand | None], *, polls: bool) -> set[int]:
-        """Send each driven motor its command and (``polls``) poll the others (faulted,
-        disabled: still published); the driven motors' indices."""
-        driven: set[int] = set()
-        for i, (motor, command) in enumerate(zip(self.motors, commands, strict=True)):
-            if command is not None:
-                self._send(i, motor.protocol.command_frames(command, motor.last_feedback))
-                driven.add(i)
-            elif polls:
-                self._send(i, motor.protocol.query_frames())
-        return driven
+    def _send_fresh(self, index: int) -> tuple[ImpedanceCommand | None, float, int]:
+        """Compute motor ``index``'s command and send it, again if it left stale
+        (:meth:`PeriodicLoop.is_stale`; each motor's own send is timed, so a robot's many sends
+        in a row are not taken for a stall), or poll it when it is not driven (faulted,
+        disabled: still published): (the command sent last, its time, frames sent)."""
+        motor = self.motors[index]
+        now_s = self.clock()
+        sends = 0
+        while True:
+            command = motor.core.command(now_s)
+            sends += 1
+            if command is None:
+                self._send(index, motor.protocol.query_frames())
+                return None, now_s, sends
+            self._send(index, motor.protocol.command_frames(command, motor.last_feedback))
+            if not self.is_stale(now_s, self.clock(), sends):
+                return command, now_s, sends
+            now_s = self.clock()
 
-    def _sample(self, got: _Collected, sent_s: float, sent_wall_s: float,
-                commands: list[ImpedanceCommand | None]) -> RobotSample | None:  # fmt: skip
+    def _sample(
+        self, got: _Collected, sent: list[tuple[ImpedanceCommand | None, float, int]]
+    ) -> RobotSample | None:
         if not got.replies:
             return None
         indices = tuple(sorted(got.replies))
         times = []
         for i in indices:
-            rx = got.replies[i][1]
-            # (negative for an answer to a stale send, its fresh one's missing: its own time)
-            latency = 0.0 if rx is None else min(rx - sent_wall_s, self.period_s)
+            rx, sent_s = got.replies[i][1], sent[i][1]
+            # its bus time, at most a period after its command (an answer to a stale send whose
+            # fresh one's did not come: its own time, before the fresh command's)
+            latency = 0.0 if rx is None else min(rx - WALL(sent_s), self.period_s)
             times.append(sent_s + latency)
             self.motors[i].samples += 1
         stamp = sum(times) / len(times)
@@ -358,7 +362,7 @@ class MultiControlLoop(PeriodicLoop):
         self._last_stamp_s = stamp
         return RobotSample(
             stamp, max(times) - min(times), indices, tuple(got.replies[i][0] for i in indices),
-            tuple(command_at(commands[i], sent_s, stamp) for i in indices),
+            tuple(command_at(sent[i][0], sent[i][1], stamp) for i in indices),
         )  # fmt: skip
 
     def emergency_stop(self, reason: str) -> None:
