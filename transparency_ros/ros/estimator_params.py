@@ -67,8 +67,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     P(
         "setpoint_wait_s",
         0.02,
-        "how long (in sample time) a sample waits for its /joint_setpoints before theta_d is "
-        "taken from /joint_commands and the loss reported",
+        "how long a sample waits, from its arrival, for its /joint_setpoints; then the "
+        "setpoint of the nearest stamp stands in and the loss is reported",
         read_only=True,
         low=0.0,
         high=1.0,
