@@ -18,6 +18,13 @@ runs) is still polled with the protocol's query frames, which do not drive it, a
 are still handed on: what the bus reports stays visible. Deadlines are absolute (no drift); a
 cycle that overruns by a whole period resynchronises and is counted.
 
+A command is computed for the instant its cycle starts and sent at once; if the send returns
+over half a period later (the host stalled in between), it is computed and sent again for now
+(:meth:`PeriodicLoop.is_stale`, at most three frames a cycle): a device takes the setpoint it
+receives for the present, and a moteus ramps on from it, so a stale one pulls a moving joint
+back by theta_d' times the stall (0.1 rad after 17 ms at 1 rev/s). The reply the loop keeps is
+the last of the cycle's; a reply to an earlier send keeps its own time.
+
 The loop also measures itself: achieved rate and cycle jitter (|actual period - nominal|).
 """
 
