@@ -286,10 +286,11 @@ def test_bad_configurations_are_refused() -> None:
         bus.shutdown()
 
 
-# (100 Hz: the wait for replies, 3.6 ms, lets a loaded machine's device thread answer)
-@pytest.mark.parametrize("robot", [("moteus", [1, 2], 1, "all", 100.0)], indirect=True)
+# (20 Hz: only a send 25 ms late is stale, so a loaded suite's own stalls (one more resend at
+# 100 Hz) do not add to the one made here; the wait for replies is 3.6 ms)
+@pytest.mark.parametrize("robot", [("moteus", [1, 2], 1, "all", 20.0)], indirect=True)
 def test_commands_that_left_stale_are_sent_again_fresh(robot: Robot) -> None:
-    """The host stalled 20 ms sending the first motor's sweep command (canbus test_loop_with_sim
+    """The host stalled 60 ms sending the first motor's sweep command (canbus test_loop_with_sim
     has the single-motor case): the loop sends that motor its command again, for now (each
     motor's send is timed on its own: the second's was not late); the reply to the stale one is
     counted superseded, and the sample carries fresh commands."""
@@ -301,7 +302,7 @@ def test_commands_that_left_stale_are_sent_again_fresh(robot: Robot) -> None:
     with loop.lock:
         for motor in loop.motors:
             motor.core.set_target(JointTarget(0.0, speed), time.monotonic())
-    stalling.stalls.append(0.02)
+    stalling.stalls.append(0.06)
     loop.cycle()
     assert loop.resent_commands == 1
     first = len(robot.samples)
@@ -310,7 +311,7 @@ def test_commands_that_left_stale_are_sent_again_fresh(robot: Robot) -> None:
     loop.cycle()
     assert first > 0, "no reply within the cycle"
     commands = robot.samples[0].commands
-    assert all(c is not None and c.position_rad >= speed * 0.02 for c in commands), commands
+    assert all(c is not None and c.position_rad >= speed * 0.06 for c in commands), commands
     j1, j2 = loop.motors
     assert j1.superseded + j1.late >= 1 and j2.superseded == 0, loop.motors
     assert robot.faults == []
