@@ -43,15 +43,20 @@ EXIT_EVENT = {"mit": "exit", "odrive": "axis_state_idle", "moteus": "mode_stoppe
 COMMAND_EVENT = {"mit": "command", "odrive": "set_input_torque", "moteus": "mode_position"}
 
 
-def make(name: str) -> tuple[ActuatorProtocol, Personality]:
+DEFAULT_IDS = {"mit": 1, "odrive": 5, "moteus": 2}
+
+
+def make(name: str, motor_id: int | None = None) -> tuple[ActuatorProtocol, Personality]:
+    """A protocol and its simulated device (``motor_id``: the protocol's default here)."""
+    i = DEFAULT_IDS[name] if motor_id is None else motor_id
     if name == "mit":
-        return MitProtocol(1), MitDevice(1)
+        return MitProtocol(i), MitDevice(i)
     if name == "odrive":
-        return ODriveProtocol(5), ODriveDevice(5)
+        return ODriveProtocol(i), ODriveDevice(i)
     # (the device's own watchdog at 10 s, the most it takes, not 0.1: these rigs are not about
     # it, and a stall of this process under a loaded suite would latch it;
     # test_a_device_that_stops_... is about it)
-    return MoteusProtocol(2, watchdog_timeout_s=RIG_MOTEUS_WATCHDOG_S), MoteusDevice(2)
+    return MoteusProtocol(i, watchdog_timeout_s=RIG_MOTEUS_WATCHDOG_S), MoteusDevice(i)
 
 
 def open_loop(

@@ -9,20 +9,11 @@ from dataclasses import dataclass
 
 import pytest
 
-from test.unit.canbus.test_loop_with_sim import StallingSend
+from test.unit.canbus.test_loop_with_sim import StallingSend, make
 from transparency_ros.canbus.client import BusSettings
 from transparency_ros.canbus.multi import Motor, MultiControlLoop, RobotSample
 from transparency_ros.canbus.protocol import (
-    ActuatorProtocol,
     MitProtocol,
-    MoteusProtocol,
-    ODriveProtocol,
-)
-from transparency_ros.canbus.sim_device import (
-    MitDevice,
-    MoteusDevice,
-    ODriveDevice,
-    Personality,
 )
 from transparency_ros.canbus.sim_robot import SimulatedBus, SimulatedBuses
 from transparency_ros.core.actuator_physics import ActuatorPhysics, PhysicsParams
@@ -31,15 +22,6 @@ from transparency_ros.core.driver import DriverCore, DriverMode, DriverSettings,
 from transparency_ros.ros.actuator_driver.hardware import ROBOT_SIM_STEP_S
 
 _channels = itertools.count()
-
-
-def make(name: str, motor_id: int) -> tuple[ActuatorProtocol, Personality]:
-    if name == "mit":
-        return MitProtocol(motor_id), MitDevice(motor_id)
-    if name == "odrive":
-        return ODriveProtocol(motor_id), ODriveDevice(motor_id)
-    # (its own watchdog at 10 s: a stall of this process under load would latch it at 0.1)
-    return MoteusProtocol(motor_id, watchdog_timeout_s=10.0), MoteusDevice(motor_id)
 
 
 @dataclass
