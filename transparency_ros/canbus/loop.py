@@ -153,6 +153,25 @@ class PeriodicLoop:
         self.resent_commands += 1
         return True
 
+    def send_fresh(
+        self,
+        command_at: Callable[[float], ImpedanceCommand | None],
+        send: Callable[[ImpedanceCommand | None], None],
+    ) -> tuple[ImpedanceCommand | None, float, int]:
+        """Compute a motor's command for now and send it (None: a poll, nothing to go
+        stale), again while it left stale (:meth:`is_stale`): (the command sent last, the time
+        it was computed for, frames sent)."""
+        now_s = self.clock()
+        sends = 0
+        while True:
+            command = command_at(now_s)
+            send(command)
+            sends += 1
+            left_s = self.clock()
+            if command is None or not self.is_stale(now_s, left_s, sends):
+                return command, now_s, sends
+            now_s = left_s
+
     def min_unanswered(self, core: DriverCore) -> int:
         """Requests a silent motor must have left unanswered before its watchdog trips: half of
         what this loop sends in ``reply_silence_s`` (at least 3), so that a stall of this host,
@@ -335,8 +354,9 @@ class ControlLoop(PeriodicLoop):
             ref_wall_s = WALL(ref_s)
             for queued, queued_rx in self.client.drain():
                 self._late(queued, queued_rx, ref_s, ref_wall_s, samples)
-            command, sent_s, first_s, sends = self._send_command()
-            sent_wall_s, first_wall_s = WALL(sent_s), WALL(first_s)
+            first_wall_s = WALL(self.clock())
+            command, sent_s, sends = self.send_fresh(self.core.command, self._send)
+            sent_wall_s = WALL(sent_s)
 
             def late(reply: Feedback, rx_wall_s: float) -> None:  # an older request's reply
                 self._late(reply, rx_wall_s, ref_s, ref_wall_s, samples)
@@ -398,24 +418,14 @@ class ControlLoop(PeriodicLoop):
         self.superseded_replies += max(0, answered - 1)
         return answer
 
-    def _send_command(self) -> tuple[ImpedanceCommand | None, float, float, int]:
-        """Compute this cycle's command and send it, again if it left stale (see
-        :meth:`PeriodicLoop.is_stale`): (the command sent last, the time it was computed for,
-        the first one's, frames sent)."""
+    def _send(self, command: ImpedanceCommand | None) -> None:
+        """The command's frames, or a poll when the motor is not driven."""
         protocol = self.client.protocol
-        first_s = now_s = self.clock()
-        sends = 0
-        while True:
-            command = self.core.command(now_s)
-            sends += 1
-            if command is None:  # a poll: nothing to go stale
-                self.client.send(protocol.query_frames())
-                return None, now_s, first_s, sends
-            self.client.send(protocol.command_frames(command, self.client.last_feedback))
-            left_s = self.clock()
-            if not self.is_stale(now_s, left_s, sends):
-                return command, now_s, first_s, sends
-            now_s = left_s
+        self.client.send(
+            protocol.query_frames()
+            if command is None
+            else protocol.command_frames(command, self.client.last_feedback)
+        )
 
     def emergency_stop(self, reason: str) -> None:
         self.core.fault(reason)

@@ -324,23 +324,17 @@ class MultiControlLoop(PeriodicLoop):
             self.on_fault(reason)
 
     def _send_fresh(self, index: int) -> tuple[ImpedanceCommand | None, float, int]:
-        """Compute motor ``index``'s command and send it, again if it left stale
-        (:meth:`PeriodicLoop.is_stale`; each motor's own send is timed, so a robot's many sends
-        in a row are not taken for a stall), or poll it when it is not driven (faulted,
-        disabled: still published): (the command sent last, its time, frames sent)."""
+        """Motor ``index``'s command sent (:meth:`PeriodicLoop.send_fresh`: each motor's own
+        send is timed, so a robot's many sends in a row are not taken for a stall), or a poll
+        when it is not driven (faulted, disabled: still published)."""
         motor = self.motors[index]
-        now_s = self.clock()
-        sends = 0
-        while True:
-            command = motor.core.command(now_s)
-            sends += 1
-            if command is None:
-                self._send(index, motor.protocol.query_frames())
-                return None, now_s, sends
-            self._send(index, motor.protocol.command_frames(command, motor.last_feedback))
-            if not self.is_stale(now_s, self.clock(), sends):
-                return command, now_s, sends
-            now_s = self.clock()
+
+        def send(command: ImpedanceCommand | None) -> None:
+            protocol = motor.protocol
+            self._send(index, protocol.query_frames() if command is None
+                       else protocol.command_frames(command, motor.last_feedback))  # fmt: skip
+
+        return self.send_fresh(motor.core.command, send)
 
     def _sample(
         self, got: _Collected, sent: list[tuple[ImpedanceCommand | None, float, int]]
@@ -349,11 +343,12 @@ class MultiControlLoop(PeriodicLoop):
             return None
         indices = tuple(sorted(got.replies))
         times = []
+        wall_offset_s = WALL.offset_s()  # (once per cycle, not per motor)
         for i in indices:
             rx, sent_s = got.replies[i][1], sent[i][1]
             # its bus time, at most a period after its command (an answer to a stale send whose
             # fresh one's did not come: its own time, before the fresh command's)
-            latency = 0.0 if rx is None else min(rx - WALL(sent_s), self.period_s)
+            latency = 0.0 if rx is None else min(rx - sent_s - wall_offset_s, self.period_s)
             times.append(sent_s + latency)
             self.motors[i].samples += 1
         stamp = sum(times) / len(times)
