@@ -39,7 +39,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-PROMINENCES = [2.0, 3.0, 5.0, 8.0, 10.0, 12.0, 15.0, 20.0, 30.0]
+PROMINENCES = [2.0, 3.0, 5.0, 8.0, 10.0, 12.0, 15.0, 20.0, 30.0]  # flat thresholds
+RATIOS = [0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.2, 1.5, 2.0]  # prominence over prominent_wave(M)
 PERIOD_TOLERANCE = 0.03  # a period this close to the truth is the hidden one
 CYCLE_BANDS = [(1.0, 1.25), (1.25, 1.5), (1.5, 2.0), (2.0, float("inf"))]
 SPREADS = [0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0]
@@ -65,6 +66,7 @@ def log_campaign(campaign: Path) -> dict[str, Any]:
             "cycles": s.scanned[0][1],
             # (NaN, not measured: null, strict JSON)
             "spread": None if math.isnan(s.scanned[0][2]) else s.scanned[0][2],
+            "independent": s.scanned[0][3],
             "gain": float(s.gain),
             # every condition of the rule but the share
             "eligible": bool(
@@ -100,15 +102,41 @@ def _eligible(
     ]
 
 
+def independent(step: dict[str, Any]) -> float:
+    """The periods the step's scan could tell apart (``DropCogging.independent_periods``);
+    logs made before it was recorded: from the chosen period and its periods of travel, as
+    the scan counts them with its finest period at MOST_COGGING_PERIODS (a coarse encoder's
+    is finer than that from 2^12 counts per revolution up; a coarser one's, 2^9-2^11, is
+    overstated there, and so its threshold)."""
+    if step.get("independent") is not None:
+        return float(step["independent"])
+    from transparency_ros.analysis.discrepancy.drop_cogging import (  # noqa: PLC0415
+        MOST_COGGING_PERIODS,
+    )
+
+    span = step["cycles"] * 2 * math.pi / step["periods"] if step["periods"] else 0.0
+    if span <= 0.0:
+        return 1.0
+    coarsest = max(2, math.ceil(2 * math.pi / span))
+    return max(1.0, (max(MOST_COGGING_PERIODS, coarsest) - coarsest) * span / (2 * math.pi))
+
+
+def over_threshold(step: dict[str, Any]) -> float:
+    """The step's prominence over the one the rule asks of its scan (1: just named)."""
+    from transparency_ros.analysis.discrepancy.steps import prominent_wave  # noqa: PLC0415
+
+    return float(step["prominence"]) / prominent_wave(independent(step))
+
+
 def _true_period(step: dict[str, Any], truth: dict[str, Any]) -> bool:
     true = truth["params"].get("cogging_periods_per_rev")
     return bool(true) and abs(step["periods"] - true) <= PERIOD_TOLERANCE * true
 
 
 def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
-    from transparency_ros.analysis.discrepancy.discover import (  # noqa: PLC0415
-        PROMINENT_WAVE,
+    from transparency_ros.analysis.discrepancy.steps import (  # noqa: PLC0415
         WAVE_CYCLES,
+        WAVE_FALSE_ALARM,
     )
 
     absent = [r for r in rows if _kind(r["truth"]) == "absent"]
@@ -116,24 +144,34 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
 
     waves = (WAVE_CYCLES, float("inf"))  # the rule's periods of travel
 
-    def prominences(
-        r: dict[str, Any], band: tuple[float, float], *, true: bool = False
-    ) -> list[float]:
-        return [s["prominence"] for s in _eligible(r, band, true=true)]
+    def measure(
+        r: dict[str, Any], band: tuple[float, float], of: Any, *, true: bool = False
+    ) -> float:
+        return max((of(s) for s in _eligible(r, band, true=true)), default=0.0)
 
-    def most(r: dict[str, Any], band: tuple[float, float], *, true: bool = False) -> float:
-        return max(prominences(r, band, true=true), default=0.0)
+    def prominence(s: dict[str, Any]) -> float:
+        return float(s["prominence"])
 
-    # waived share: over WAVE_CYCLES periods of travel, at or above a prominence
+    # waived share: over WAVE_CYCLES periods of travel, the rule's threshold scaled by a ratio
     waived = {
+        str(k): {
+            "absent_named": sum(measure(r, waves, over_threshold) >= k for r in absent),
+            "hidden_named": sum(measure(r, waves, over_threshold, true=True) >= k for r in hidden),
+        }
+        for k in RATIOS
+    }
+    # and the flat thresholds of the rule before (15 until issue 26's thirty-third round)
+    flat = {
         str(p): {
-            "absent_named": sum(most(r, waves) >= p for r in absent),
-            "hidden_named": sum(most(r, waves, true=True) >= p for r in hidden),
+            "absent_named": sum(measure(r, waves, prominence) >= p for r in absent),
+            "hidden_named": sum(measure(r, waves, prominence, true=True) >= p for r in hidden),
         }
         for p in PROMINENCES
     }
-    absent_waves = sorted((most(r, waves) for r in absent), reverse=True)
-    hidden_true = sorted((most(r, waves, true=True) for r in hidden), reverse=True)
+    absent_waves = sorted((measure(r, waves, over_threshold) for r in absent), reverse=True)
+    hidden_true = sorted(
+        (measure(r, waves, over_threshold, true=True) for r in hidden), reverse=True
+    )
     lines = [
         "# Cogging's period prominence (drop tests), calibrated on the zoo's campaigns",
         "",
@@ -141,48 +179,60 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
         f" cogging absent (neither required nor allowed) in {len(absent)}, hidden in"
         f" {len(hidden)}. Steps counted: eligible (every condition but the share).",
         "",
-        f"The rule ships PROMINENT_WAVE = {PROMINENT_WAVE:g}, WAVE_CYCLES = {WAVE_CYCLES:g}"
-        " (steps.py): a wave at least this prominent over at least this many periods of"
-        " travel is named without the share.",
+        f"The rule (steps.py): a wave over WAVE_CYCLES = {WAVE_CYCLES:g} periods of travel or"
+        " more whose prominence reaches prominent_wave(M) = log2(M / WAVE_FALSE_ALARM),"
+        f" WAVE_FALSE_ALARM = {WAVE_FALSE_ALARM:g}, M the periods its scan could tell apart,"
+        " is named without the share. Below, a step's prominence over its threshold"
+        " (1: named; logs made before M was recorded: M from the step's period and travel).",
         "",
-        f"Largest prominence of an eligible wave over {WAVE_CYCLES:g} periods of travel or more,"
-        " per campaign where cogging is absent (top 5): "
-        + ", ".join(f"{p:.1f}" for p in absent_waves[:5])
+        f"Largest prominence over the threshold of an eligible wave over {WAVE_CYCLES:g} periods"
+        " of travel or more, per campaign where cogging is absent (top 5): "
+        + ", ".join(f"{p:.2f}" for p in absent_waves[:5])
         + "; where it is hidden, of the true period: "
-        + ", ".join(f"{p:.1f}" for p in hidden_true),
+        + ", ".join(f"{p:.2f}" for p in hidden_true),
         "",
-        "| prominence at least | absent campaigns that would name a wave (share waived) |"
+        "| prominence over the threshold at least | absent campaigns that would name a wave"
+        " (share waived) | hidden campaigns whose true period would be named |",
+        "|---|---|---|",
+        *(
+            f"| {k} | {w['absent_named']}/{len(absent)} | {w['hidden_named']}/{len(hidden)} |"
+            for k, w in waived.items()
+        ),
+        "",
+        "The flat thresholds (the rule before issue 26's thirty-third round: 15):",
+        "",
+        "| prominence at least | absent campaigns that would name a wave |"
         " hidden campaigns whose true period would be named |",
         "|---|---|---|",
         *(
             f"| {p} | {w['absent_named']}/{len(absent)} | {w['hidden_named']}/{len(hidden)} |"
-            for p, w in waived.items()
+            for p, w in flat.items()
         ),
     ]
     # how few periods of travel a wave may span: per band of periods, the most prominent
     # eligible wave where cogging is absent, and the hidden ones the rule would name there
     bands = []
     for band in CYCLE_BANDS:
-        found = [p for p in (prominences(r, band) for r in absent) if p]
-        largest = sorted((max(p) for p in found), reverse=True)
+        found = [m for r in absent if (m := measure(r, band, over_threshold))]
+        largest = sorted(found, reverse=True)
         bands.append({
             "cycles": [band[0], band[1] if band[1] < float("inf") else None],  # (strict JSON)
             "absent_with_a_wave": len(largest),
             "absent_largest": largest[:5],
-            "hidden_named": sum(most(r, band, true=True) >= PROMINENT_WAVE for r in hidden),
+            "hidden_named": sum(measure(r, band, over_threshold, true=True) >= 1 for r in hidden),
         })  # fmt: skip
     lines += [
         "",
         f"By periods of travel (the rule's WAVE_CYCLES = {WAVE_CYCLES:g}): campaigns where cogging"
-        " is absent with an eligible wave in the band, the largest prominences there, and hidden"
-        f" coggings whose true period reaches {PROMINENT_WAVE:g} there.",
+        " is absent with an eligible wave in the band, the largest prominences over their"
+        " thresholds there, and hidden coggings whose true period reaches its threshold there.",
         "",
-        "| periods of travel | absent campaigns with a wave | largest prominence (absent) |"
-        f" hidden named at {PROMINENT_WAVE:g} |",
+        "| periods of travel | absent campaigns with a wave | largest over the threshold"
+        " (absent) | hidden at their threshold |",
         "|---|---|---|---|",
         *(
             f"| {band[0]:g}-{band[1]:g} | {b['absent_with_a_wave']}/{len(absent)} |"
-            f" {', '.join(f'{p:.1f}' for p in b['absent_largest']) or '-'} |"
+            f" {', '.join(f'{p:.2f}' for p in b['absent_largest']) or '-'} |"
             f" {b['hidden_named']}/{len(hidden)} |"
             for band, b in zip(CYCLE_BANDS, bands, strict=True)
         ),
@@ -196,12 +246,13 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
         "absent": len(absent),
         "hidden": len(hidden),
         "thresholds": {
-            "prominent": PROMINENT_WAVE,
+            "false_alarm": WAVE_FALSE_ALARM,
             "cycles": WAVE_CYCLES,
         },
         "absent_largest": absent_waves,
         "hidden_true_largest": hidden_true,
         "waived": waived,
+        "flat": flat,
         "median_absent": float(np.median(absent_waves)) if absent_waves else None,
     }
     return lines, data

@@ -381,12 +381,15 @@ def test_a_parameter_held_at_its_null_bound_is_not_told_from_nothing() -> None:
 
 def test_a_wave_whose_period_stands_out_of_the_scan_is_judged_by_its_prominence() -> None:
     """A cogging step removing 0.45 of the error above the floor (under the uniform 0.75):
-    named where its period's waves removed PROMINENT_WAVE times what the median period's did,
-    over WAVE_CYCLES periods of the arm's travel; not with the same prominence over one period
-    (a smooth torque any low period imitates), nor with an ordinary one. An ordinary one is
-    named where every trial shows the same wave (its spread at most REPLICATED_SPREAD) over
-    REPLICATED_CYCLES periods, not over fewer, nor with a wider or unmeasured spread. A pair's
-    wave keeps the uniform share; a step without a scanned choice is judged as before."""
+    named where its period's waves removed prominent_wave(M) times what the median period's
+    did, M the periods its scan could tell apart, over WAVE_CYCLES periods of the arm's
+    travel; not with the same prominence over one period (a smooth torque any low period
+    imitates), nor with an ordinary one. A scan that told more periods apart asks more (the
+    largest of more periods stands out further by chance): a prominence enough among 20 is
+    not among 300. An ordinary one is named where every trial shows the same wave (its spread
+    at most REPLICATED_SPREAD) over REPLICATED_CYCLES periods, not over fewer, nor with a
+    wider or unmeasured spread. A pair's wave keeps the uniform share; a step without a
+    scanned choice is judged as before."""
     from transparency_ros.analysis.discrepancy import steps as d  # noqa: PLC0415
 
     loop = Discoverer(SimpleNamespace(min_improvement=0.75))  # type: ignore[arg-type]
@@ -397,18 +400,22 @@ def test_a_wave_whose_period_stands_out_of_the_scan_is_judged_by_its_prominence(
         prominence: float | None,
         cycles: float,
         added: int = 1,
+        *,
         spread: float = math.nan,
+        independent: float = 20.0,
     ) -> Step:
         s = _step(wave, [0.05], 1e-3, 1e-4)
         s.added = [wave] * added
         s.gain = gain
-        s.scanned = [] if prominence is None else [(prominence, cycles, spread)]
+        s.scanned = [] if prominence is None else [(prominence, cycles, spread, independent)]
         return s
 
-    assert loop._share(step(0.45, d.PROMINENT_WAVE, d.WAVE_CYCLES)) == 0.0
-    assert loop._share(step(0.45, d.PROMINENT_WAVE, 1.1)) == 0.75
-    assert loop._share(step(0.45, d.PROMINENT_WAVE - 1, 10.0)) == 0.75
-    assert loop._share(step(0.45, d.PROMINENT_WAVE * 3, 10.0, added=2)) == 0.75
+    stands_out = d.prominent_wave(20.0)
+    assert loop._share(step(0.45, stands_out, d.WAVE_CYCLES)) == 0.0
+    assert loop._share(step(0.45, stands_out, 1.1)) == 0.75
+    assert loop._share(step(0.45, stands_out - 1, 10.0)) == 0.75
+    assert loop._share(step(0.45, stands_out, 10.0, independent=300.0)) == 0.75
+    assert loop._share(step(0.45, stands_out * 3, 10.0, added=2)) == 0.75
     assert loop._share(step(0.45, None, 0.0)) == 0.75
     alike = d.REPLICATED_SPREAD
     assert loop._share(step(0.1, 2.0, d.REPLICATED_CYCLES, spread=alike)) == 0.0
@@ -416,6 +423,27 @@ def test_a_wave_whose_period_stands_out_of_the_scan_is_judged_by_its_prominence(
     assert loop._share(step(0.1, 2.0, 10.0, spread=alike + 0.1)) == 0.75
     assert loop._share(step(0.1, 2.0, 10.0)) == 0.75
     assert loop._share(step(0.1, 2.0, 10.0, added=2, spread=0.0)) == 0.75
+
+
+def test_the_prominence_a_wave_needs_is_a_peak_test_over_the_periods_told_apart() -> None:
+    """prominent_wave(M): the prominence the largest of M periods reaches by chance with
+    probability WAVE_FALSE_ALARM, where each period's removed error is exponential (its
+    median ln 2 of its mean): M 2^-t = alpha. Checked on drawn periodograms: against their
+    true median, the rate is alpha; against the median of the same M draws (the scan's own
+    level, itself scattered), a few times alpha and under 5 % for M of 10-100 (the zoo, not
+    this model, sets the rule: benchmarks/prominence_calibration.py)."""
+    from transparency_ros.analysis.discrepancy import steps as d  # noqa: PLC0415
+
+    assert d.prominent_wave(28.0) == pytest.approx(math.log2(28.0 / d.WAVE_FALSE_ALARM))
+    assert d.prominent_wave(0.2) == d.prominent_wave(1.0)  # (one period at least)
+    assert d.prominent_wave(10.0) < d.prominent_wave(30.0) < d.prominent_wave(300.0)
+    rng = np.random.default_rng(7)
+    for m in (10, 30, 100):
+        draws = rng.exponential(size=(40000, m))
+        known = np.mean(draws.max(axis=1) / math.log(2) >= d.prominent_wave(m))
+        assert known == pytest.approx(d.WAVE_FALSE_ALARM, rel=0.3), m
+        own = np.mean(draws.max(axis=1) / np.median(draws, axis=1) >= d.prominent_wave(m))
+        assert d.WAVE_FALSE_ALARM < own < 0.05, (m, own)
 
 
 def test_a_phase_above_the_leftover_is_unexplained_where_the_whole_residual_is_not() -> None:

@@ -317,6 +317,9 @@ def test_the_cogging_scan_finds_a_waves_period_and_size(tmp_path: Path, between:
     assert cogging.wave_cycles == pytest.approx(
         cogging.periods * problem.position_span / (2 * math.pi)
     )
+    # the periods it could tell apart: its range over its resolution (2 pi / travel)
+    most = drop_cogging.MOST_COGGING_PERIODS * problem.position_span / (2 * math.pi)
+    assert 0.5 * most < cogging.independent_periods < most
 
 
 def test_a_wave_every_trial_shows_alike_has_a_small_spread(tmp_path: Path) -> None:

@@ -13,7 +13,7 @@ scores it on the held-out trials, and keeps the best only if it removes at least
 cause; for an effect of one sensor's readings, of that sensor's error above its own floor), at
 least a tenth of the floor in absolute terms, the held-out information criterion
 (n log(RSS/n) + 2k) improves by more than 10, and its fit is meaningful (a wave whose period
-stands out of its scan is named without the share: ``PROMINENT_WAVE``). When no single
+stands out of its scan is named without the share: ``steps.prominent_wave``). When no single
 candidate passes and a phase is left unexplained, candidates are fitted two at a time (two
 missing effects may each explain too little alone; ``pairs``), only with it where one
 candidate explains it at values it cannot mean (held at a bound). A kept effect gets
@@ -67,8 +67,8 @@ from transparency_ros.analysis.discrepancy.revisit import (
 )
 from transparency_ros.analysis.discrepancy.steps import (
     ALIKE,
-    PROMINENT_WAVE,  # noqa: F401 - the wave's thresholds, read here by tests and benchmarks
-    WAVE_CYCLES,  # noqa: F401
+    WAVE_CYCLES,  # noqa: F401 - the wave's thresholds, read here by tests and benchmarks
+    WAVE_FALSE_ALARM,  # noqa: F401
     Base,
     Step,
     choose,

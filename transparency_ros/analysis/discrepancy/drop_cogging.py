@@ -58,6 +58,9 @@ class DropCogging(DropEffect):
         # error against the median period's, and the periods the arm's travel spans
         self.prominence: float | None = None
         self.wave_cycles = 0.0
+        # the periods the scan could tell apart: its range of N over its resolution (two N
+        # whose waves drift one whole period apart over the travel, 2 pi / span)
+        self.independent_periods = 1.0
 
     def apply(self, ph: DropPhysics, p: FloatArray, problem: DropProblem) -> DropPhysics:
         return with_cogging(ph, float(p[0]), float(p[1]), self.periods)
@@ -124,6 +127,7 @@ class DropCogging(DropEffect):
         chosen = linear[self.periods][0]
         self.prominence = chosen / typical if typical > 0 else (math.inf if chosen > 0 else 0.0)
         self.wave_cycles = self.periods * span / (2 * math.pi)
+        self.independent_periods = max(1.0, (finest - coarsest) * span / (2 * math.pi))
         return start
 
     def spread(

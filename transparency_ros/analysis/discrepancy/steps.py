@@ -16,15 +16,23 @@ ALIKE = 1.05  # held-out RMSEs this close cannot be told apart (choose, Discover
 EXPECTED_MARGIN = 1.10  # an effect the recording predicts is preferred this close to the best
 # A wave chosen among every period the recording can show (cogging) removes some of any error.
 # Where its period stands out of the scan (its prominence: what its waves remove against what
-# the median period's remove, drop_cogging.DropCogging.scan) by PROMINENT_WAVE or more, over
-# WAVE_CYCLES periods of the arm's travel at least (fewer is a smooth torque that any low
-# period imitates), the share of the error it must remove is waived: what is left beside it
-# is the model's own error elsewhere (the contact and friction laws), which no wave takes.
-# Measured on zoo campaigns with and without a hidden cogging:
-# benchmarks/prominence_calibration.py. (400 campaigns, 355 without a cogging: the waves the
-# scan finds over 1-1.25 periods of travel, its coarsest, stand out up to 157 times; over
-# 1.25-2 periods no more than 7.7, as over 2 and more; hence 1.5, not 2 as before.)
-PROMINENT_WAVE = 15.0
+# the median period's remove, drop_cogging.DropCogging.scan) by prominent_wave(M) or more, M
+# the periods the scan could tell apart, over WAVE_CYCLES periods of the arm's travel at least
+# (fewer is a smooth torque that any low period imitates), the share of the error it must
+# remove is waived: what is left beside it is the model's own error elsewhere (the contact and
+# friction laws), which no wave takes. The threshold is a periodogram's peak test with its
+# look-elsewhere correction: where no period is singled out, the error a period's two waves
+# remove is about exponential (two degrees of freedom), whose median is ln 2 of its mean, so
+# the largest of M independent periods passes t times the median with probability about
+# M 2^-t; t = log2(M / WAVE_FALSE_ALARM) (against a median itself taken over the M periods,
+# and so scattered, 1.8-4.4 % for M of 100-10: test_discrepancy). A short travel tells few
+# periods apart (the scan's resolution is a period's drift of one whole period over the
+# travel): M 7-30 on the zoo, thresholds 9.4-11.6. Measured on zoo campaigns with and without
+# a hidden cogging (benchmarks/prominence_calibration.py; 500 campaigns, 449 without a
+# cogging: none more named than under the flat 15 it replaces, the largest such wave 0.73 of
+# its threshold; a wave over 1-1.25 periods of travel, the scan's coarsest, stands out up to
+# 157 times; over 1.25-2 periods no more than 7.7, as over 2 and more; hence 1.5).
+WAVE_FALSE_ALARM = 0.01
 WAVE_CYCLES = 1.5
 # A wave whose period does not stand out may still be the motor's: where every trial, fitted
 # on its own, shows the same wave (its ``spread``, drop_cogging.DropCogging.spread, at most
@@ -68,8 +76,9 @@ class Step:
     elsewhere: str = ""  # what a second channel showed of it (a problem's shows_elsewhere)
     # of an added effect whose choice was made from the data by a scan (cogging's period):
     # (its prominence, the periods the arm's travel spans, its spread over the trials: NaN
-    # where not measured) when the step was made (see scan_facts)
-    scanned: list[tuple[float, float, float]] = field(default_factory=list)
+    # where not measured, the periods the scan could tell apart) when the step was made (see
+    # scan_facts)
+    scanned: list[tuple[float, float, float, float]] = field(default_factory=list)
 
     def new(self) -> list[tuple[Any, FloatArray]]:
         return list(zip(self.added, self.params[len(self.params) - len(self.added) :], strict=True))
@@ -142,14 +151,20 @@ def stood_in(step: Step, base: Base) -> bool:
     return False
 
 
+def prominent_wave(independent: float) -> float:
+    """The prominence a scanned wave's period needs to stand out of ``independent`` periods
+    the scan could tell apart, at a false-alarm rate of WAVE_FALSE_ALARM (see above)."""
+    return math.log2(max(independent, 1.0) / WAVE_FALSE_ALARM)
+
+
 def share_needed(step: Step, uniform: float) -> float:
     """The share of the error above the floor ``step`` must remove (Discoverer._names):
     ``uniform``; none for a single wave whose period stands out of its scan
-    (``PROMINENT_WAVE``, over ``WAVE_CYCLES`` periods of travel at least) or that every
+    (``prominent_wave``, over ``WAVE_CYCLES`` periods of travel at least) or that every
     trial shows alike (``REPLICATED_SPREAD``, over ``REPLICATED_CYCLES`` periods at least)."""
     if len(step.added) == 1 and step.scanned:
-        prominence, cycles, spread = step.scanned[0]
-        if (prominence >= PROMINENT_WAVE and cycles >= WAVE_CYCLES) or (
+        prominence, cycles, spread, independent = step.scanned[0]
+        if (prominence >= prominent_wave(independent) and cycles >= WAVE_CYCLES) or (
             cycles >= REPLICATED_CYCLES and spread <= REPLICATED_SPREAD
         ):
             return 0.0
@@ -158,9 +173,10 @@ def share_needed(step: Step, uniform: float) -> float:
 
 def scan_facts(
     problem: Any, effects: list[Any], added: list[Any], params: list[FloatArray]
-) -> list[tuple[float, float, float]]:
+) -> list[tuple[float, float, float, float]]:
     """``Step.scanned`` of the effects ``added`` to ``effects`` (all parameters ``params``):
-    for each whose choice a scan made, (prominence, periods of travel, spread). The spread
+    for each whose choice a scan made, (prominence, periods of travel, spread, periods the
+    scan could tell apart). The spread
     (a refit per trial) is measured for a single wave over ``WAVE_CYCLES`` periods of travel
     or more (NaN otherwise): the rule asks for it from ``REPLICATED_CYCLES`` on, and the
     calibration (benchmarks/prominence_calibration.py) logs it from ``WAVE_CYCLES`` to show
@@ -171,11 +187,13 @@ def scan_facts(
         if getattr(a, "prominence", None) is None:
             continue
         cycles = float(getattr(a, "wave_cycles", 0.0))
+        independent = float(getattr(a, "independent_periods", 1.0))
         spread: Callable[..., float] | None = getattr(a, "spread", None)
-        if spread is not None and len(added) == 1 and cycles >= WAVE_CYCLES:
-            out.append((float(a.prominence), cycles, spread(problem, effects, params)))
-        else:
-            out.append((float(a.prominence), cycles, math.nan))
+        measured = spread is not None and len(added) == 1 and cycles >= WAVE_CYCLES
+        spread_value = (
+            spread(problem, effects, params) if spread is not None and measured else math.nan
+        )
+        out.append((float(a.prominence), cycles, spread_value, independent))
     return out
 
 
