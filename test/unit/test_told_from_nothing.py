@@ -1,5 +1,5 @@
 """The rule that names nothing whose 95 % interval holds its value of no effect, read once
-more on the final model (Discoverer._told_from_nothing): zoo_12711 named an offset in a pair
+more on the final model (revisit.told_from_nothing): zoo_12711 named an offset in a pair
 beside a b_v drift, where it held the shuttle's weight; once the weight was named, the offset
 was refitted to 0.0001 N m (95 % -0.0004 to 0.0006) and was still reported."""
 
@@ -13,6 +13,7 @@ import numpy as np
 
 from transparency_ros.analysis.discrepancy.discover import Discoverer
 from transparency_ros.analysis.discrepancy.findings import Finding, Report
+from transparency_ros.analysis.discrepancy.revisit import told_from_nothing
 
 LEFT = 1e-3  # the held-out error the final model leaves [rad]
 
@@ -58,7 +59,7 @@ def _run(
     # (every effect's fit held by itself: nothing to refit among the others)
     for e in effects:
         e.fittable = e.fittable and e.name != "payload_gravity"
-    kept, _params, held = loop._told_from_nothing(report, effects, params, error(effects, [], True))
+    kept, _params, held = told_from_nothing(loop, report, effects, params, error(effects, [], True))
     assert held.size == 500
     return [e.name for e in kept], report
 

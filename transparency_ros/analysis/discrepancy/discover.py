@@ -35,7 +35,6 @@ label."""
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -64,6 +63,7 @@ from transparency_ros.analysis.discrepancy.revisit import (
     friction_given_away,
     rivals_again,
     still_needed,
+    told_from_nothing,
     variants_again,
 )
 from transparency_ros.analysis.discrepancy.steps import (
@@ -144,7 +144,7 @@ class Discoverer:
             report, effects, params, held_err, remaining=remaining, floor=floor
         )
         effects, params, held_err = self._on_load_cell(report, effects, params, held_err)
-        effects, params, held_err = self._told_from_nothing(report, effects, params, held_err)
+        effects, params, held_err = told_from_nothing(self, report, effects, params, held_err)
         report.notes += [
             f"not named: {c.describe()}; {self._unnamed(c)}"
             for c in self._pending_declared(effects)
@@ -230,66 +230,6 @@ class Discoverer:
                 effects, params, held_err = self._declared(report, effects, params, held_err, floor)
             remaining = not_named(remaining, effects)
         return effects, params, held_err, remaining, closest
-
-    def _told_from_nothing(
-        self,
-        report: Report,
-        effects: list[Any],
-        params: list[FloatArray],
-        held_err: FloatArray,
-    ) -> tuple[list[Any], list[FloatArray], FloatArray]:
-        """The rule that names nothing whose 95 % interval holds its value of no effect
-        (``null_inside``), read once more on the final model: an effect named beside others
-        (a pair, whose members the revisit does not take out one by one) may have been
-        refitted to nothing by what was named after it. On zoo_12711 (a b_v drift x1.66, the
-        shuttle's weight) no single effect was named, the pair of the drift and an offset
-        was, the offset holding the weight; the weight was then named (``stood_in``) and the
-        offset refitted to 0.0001 N m (95 % -0.0004 to 0.0006), and was still reported. Each
-        such effect is dropped with a note, the others refitted without it; effects named
-        for what the recording declares or shows (a shuttle's weight, a rebound the load
-        cell shows) are not judged by a fit and stay. The intervals are the fit's, before
-        they are widened for the model's own error; one the held-out data still need (without
-        it, refitted, their RMSE more than ALIKE times higher) stays."""
-        i = 0
-        while i < len(effects):
-            effect = effects[i]
-            null = getattr(effect, "null", None)
-            ci = report.findings[i].confidence_interval
-            if (
-                null is None
-                or not effect.fittable
-                or getattr(effect, "declared", False)
-                or getattr(effect, "shown", False)
-                or not all(name in ci for name in effect.param_names)
-                or not all(
-                    math.isnan(z) or ci[name][0] <= z <= ci[name][1]
-                    for name, z in zip(effect.param_names, null, strict=True)
-                )
-            ):
-                i += 1
-                continue
-            others, rest = effects[:i] + effects[i + 1 :], params[:i] + params[i + 1 :]
-            rest, result = refit(self.problem, others, rest)
-            without = self.problem.error(others, rest, True)
-            if rmse(without) > ALIKE * rmse(held_err):  # (the held-out data still need it)
-                i += 1
-                continue
-            self.progress(f"{effect.name} is told from nothing on the final model: dropped")
-            report.notes.append(
-                f"dropped {effect.name}: on the final model its 95 % interval holds its value"
-                " of no effect ("
-                + ", ".join(
-                    f"{name} {params[i][k]:.4g} ({ci[name][0]:.3g} to {ci[name][1]:.3g})"
-                    for k, name in enumerate(effect.param_names)
-                )
-                + ")"
-            )
-            report.findings[i : i + 1] = []
-            effects, params, held_err = others, rest, without
-            if result is not None:
-                update_findings(report, effects, params, interval(result, result.x))
-            i = 0
-        return effects, params, held_err
 
     def _on_load_cell(
         self,

@@ -189,10 +189,9 @@ def scan_facts(
         cycles = float(getattr(a, "wave_cycles", 0.0))
         independent = float(getattr(a, "independent_periods", 1.0))
         spread: Callable[..., float] | None = getattr(a, "spread", None)
-        measured = spread is not None and len(added) == 1 and cycles >= WAVE_CYCLES
-        spread_value = (
-            spread(problem, effects, params) if spread is not None and measured else math.nan
-        )
+        spread_value = math.nan
+        if spread is not None and len(added) == 1 and cycles >= WAVE_CYCLES:
+            spread_value = spread(problem, effects, params)
         out.append((float(a.prominence), cycles, spread_value, independent))
     return out
 
