@@ -49,6 +49,26 @@ def test_every_relative_link_resolves(page: Path) -> None:
     assert missing == []
 
 
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation but - and _ dropped, spaces -."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_link_to_a_section_names_a_heading_of_its_page(page: Path) -> None:
+    """A README row that points into a page's section (page.md#section) lands on it."""
+    text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)
+    missing = []
+    for target, anchor in re.findall(r"\]\(([^)#\s]*)#([^)\s]+)\)", text):
+        linked = page.parent / target if target else page
+        if linked.suffix != ".md" or not linked.exists():
+            continue
+        body = re.sub(r"```.*?```", "", linked.read_text(), flags=re.S)
+        if anchor not in {_slug(h) for h in re.findall(r"^#+ (.*)$", body, flags=re.M)}:
+            missing.append(f"{target}#{anchor}")
+    assert missing == []
+
+
 def test_the_front_page_is_short_and_links_every_page() -> None:
     readme = (ROOT / "README.md").read_text()
     assert len(readme.splitlines()) <= 200

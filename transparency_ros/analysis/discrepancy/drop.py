@@ -331,6 +331,36 @@ class DropProblem:
             step.elsewhere = view.shows(base.effects, base.params, step.added, step.params)
         return bool(step.elsewhere)
 
+    def told_apart(self, named: Sequence[DropEffect], other: Sequence[DropEffect]) -> str:
+        """What would tell ``named`` from ``other``, which explained the held-out recordings
+        alike, where the recordings say why they cannot ("" where they do not): a constant
+        torque (an offset) and a change of the Coulomb torque (a drift of it alone) act alike
+        on an arm that turns one way, which every trial's arm did after contact (on the zoo
+        the two fit to eight digits alike there: zoo_12791, docs/discrepancy.md)."""
+        kinds = {_torque_kind(e) for e in (*named, *other)}
+        pair = len(named) == len(other) == 1 and kinds == {"constant", "coulomb"}
+        if not pair or self._turned_back:
+            return ""
+        n = len(self.fit_trials) + len(self.held_trials)
+        return (
+            f"the arm turned one way after contact in all {n} trials, against which a "
+            "Coulomb torque is a constant torque: a trial in which it turns back (a drop "
+            "that rebounds, or the drive moving it both ways) tells them apart"
+        )
+
+    @cached_property
+    def _turned_back(self) -> int:
+        """The trials whose arm turned back after contact: came back from the farthest it
+        had turned (the strike turns it to negative theta, as analysed) by more than two
+        counts of the encoder or three times its noise at rest. (Not the phases' reversals:
+        the speed of an arm creeping count by count changes sign in its readings' noise.)"""
+        least = max(2 * self.encoder_count, 3 * self._sensor_noise[0])
+        turned = 0
+        for t in (*self.fit_trials, *self.held_trials):
+            q = t.q[t.t_q > t.contact_s]
+            turned += bool(q.size and float(np.max(q - np.minimum.accumulate(q))) > least)
+        return turned
+
     @cached_property
     def _load_cell(self) -> ForceView | None:
         return force_view(self)
@@ -495,6 +525,15 @@ def conventions(trials: Sequence[DropTrial]) -> list[str]:
     for trial in trials:
         notes += [f"{trial.name}: {note}" for note in trial.notes]
     return notes
+
+
+def _torque_kind(effect: DropEffect) -> str:
+    """'constant' (an offset), 'coulomb' (a drift of the Coulomb torque alone) or ''."""
+    if effect.name == "torque_offset":
+        return "constant"
+    if getattr(effect, "free", None) == (False, False, True):
+        return "coulomb"
+    return ""
 
 
 def _phase_masks(trial: DropTrial, t: FloatArray) -> dict[str, BoolArray]:

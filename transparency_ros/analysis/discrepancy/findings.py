@@ -34,6 +34,10 @@ class Finding:
     # the recording's channel it was judged on: "simulation" (the simulated positions) or a
     # problem's second one (a drop test's "load cell in the ride", drop_force)
     channel: str = "simulation"
+    # each alternative with its fitted values: {effect, parameters, heldout_rmse_ratio (its
+    # held-out RMSE over this finding's), told_apart_by (what would tell the two apart,
+    # where the recordings say why they cannot; null otherwise)}
+    alike: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -100,6 +104,47 @@ def locate(
     }
 
 
+def alike_fits(problem: Any, step: Any) -> list[dict[str, Any]]:
+    """The steps that explained the held-out data alike with ``step`` (``Step.alike``), each
+    with its fitted values, its held-out RMSE over the step's, and what would tell it from the
+    step where the problem knows why the recordings cannot (``told_apart`` of the problem,
+    e.g. an arm that turned one way in every trial: a Coulomb torque and an offset then act
+    alike). A user shown two explanations needs both sizes to judge which is plausible."""
+    told = getattr(problem, "told_apart", lambda _a, _b: "")
+    out = []
+    for other in getattr(step, "alike", []):
+        values: dict[str, float] = {}
+        for effect, x in other.new():
+            own = {n: float(v) for n, v in zip(effect.param_names, x, strict=True)}
+            own |= effect.extra_parameters(x)
+            prefix = f"{effect.name}." if len(other.added) > 1 else ""
+            values |= {prefix + n: v for n, v in own.items()}
+        out.append(
+            {
+                "effect": "+".join(a.name for a in other.added),
+                "parameters": values,
+                "heldout_rmse_ratio": float(other.rmse / step.rmse) if step.rmse > 0 else 1.0,
+                "told_apart_by": told(step.added, other.added) or None,
+            }
+        )
+    return out
+
+
+def alike_text(alike: Sequence[dict[str, Any]], names: Sequence[str]) -> str:
+    """'; explained alike by parameter_drift (coulomb_scale 0.626; held-out RMSE 1.000 times
+    this): ...' for the evidence (``names``, the alternatives, where no fits are known)."""
+    if not alike:
+        return f"; explained alike by {', '.join(names)}" if names else ""
+    parts = []
+    for a in alike:
+        values = ", ".join(f"{n} {v:.4g}" for n, v in a["parameters"].items())
+        text = f"{a['effect']} ({values}; held-out RMSE {a['heldout_rmse_ratio']:.3f} times this)"
+        if a["told_apart_by"]:
+            text += f": {a['told_apart_by']}"
+        parts.append(text)
+    return "; explained alike by " + "; ".join(parts)
+
+
 def finding(
     problem: Any, cand: Any, step: Any, base: Any, *, before: float, after: float
 ) -> Finding:
@@ -124,6 +169,7 @@ def finding(
         if judged_floor != base.floor
         else ""
     )
+    alike = alike_fits(problem, step)
     return Finding(
         effect=cand.name,
         parameters={n: float(v) for n, v in zip(cand.param_names, x, strict=True)}
@@ -142,12 +188,13 @@ def finding(
                 if together
                 else ""
             )
-            + (f"; explained alike by {', '.join(step.alternatives)}" if step.alternatives else "")
+            + alike_text(alike, step.alternatives)
         ),
         heldout_rmse_before=before,
         heldout_rmse_after=after,
         alternatives=list(step.alternatives),
         channel=judged_on,
+        alike=alike,
     )
 
 

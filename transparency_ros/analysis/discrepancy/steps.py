@@ -72,6 +72,8 @@ class Step:
     alone_rmse: list[float] = field(default_factory=list)  # a pair: the first member alone
     alone_aic: list[float] = field(default_factory=list)  # a pair: each member alone
     alternatives: list[str] = field(default_factory=list)
+    # the steps ``alternatives`` names (choose): their fitted values go into the finding
+    alike: list[Any] = field(default_factory=list)
     shown: bool = False  # stands for a declared effect the recording shows (see _each_added)
     elsewhere: str = ""  # what a second channel showed of it (a problem's shows_elsewhere)
     # of an added effect whose choice was made from the data by a scan (cogging's period):
@@ -254,5 +256,6 @@ def choose(
             c.aic,
         ),
     )
-    best.alternatives = ["+".join(a.name for a in c.added) for c in alike if c is not best]
+    best.alike = [c for c in alike if c is not best]
+    best.alternatives = ["+".join(a.name for a in c.added) for c in best.alike]
     return best
