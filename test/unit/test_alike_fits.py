@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from test.unit.test_discrepancy import _step as discrepancy_step
 from transparency_ros.analysis.discrepancy.drop import (
     DropProblem,
     load_drop_nominal,
@@ -29,19 +30,8 @@ from transparency_ros.synth.drop_campaign import write_drop_campaign
 
 
 def _step(effect: object, p: list[float], rmse: float) -> Step:
-    n = 10_000
-    return Step(
-        added=[effect],
-        params=[np.array(p)],
-        err=np.full(n, rmse),
-        rmse=rmse,
-        aic=n * np.log(rmse**2) + 2 * len(p),
-        gain=0.9,
-        judged=(5.0, rmse, 1e-4),
-        result=None,
-        meaningful=True,
-        joint=True,
-    )
+    """A single added effect's step, its parameters set from a joint fit (no intervals)."""
+    return replace(discrepancy_step(effect, p, rmse, 1e-4), joint=True)
 
 
 class _Problem:
