@@ -21,6 +21,8 @@ from transparency_ros.analysis.discrepancy.drop_effects import (
     DeclaredWeight,
     DropDrift,
     DropOffset,
+    DropRestitution,
+    HubArmCompliance,
 )
 from transparency_ros.analysis.discrepancy.findings import alike_fits, alike_text, finding
 from transparency_ros.analysis.discrepancy.steps import Base, Step, choose
@@ -134,3 +136,25 @@ def test_a_drop_test_says_an_offset_and_a_coulomb_drift_are_told_apart_by_an_arm
     trials = [*problem.fit_trials, turned, *problem.held_trials[1:]]
     again = DropProblem(trials, load_drop_nominal(None, trials))
     assert again.told_apart([offset], [coulomb]) == ""
+
+
+def test_a_drop_test_says_a_rebound_and_a_hub_spring_are_told_apart_by_a_tap_on_a_light_arm(
+    tmp_path: Path,
+) -> None:
+    """A rebound off the contact and a spring between hub and arm act alike on the motor where
+    the arm is light against the shuttle, and the reason says how light; with an arm as heavy
+    as the shuttle at its tip, no reason is given."""
+    out = write_drop_campaign(tmp_path / "c", 4, hidden=["payload_gravity"], actuator="EC60")
+    problem = _problem(out)
+    spring, rebound = HubArmCompliance(0.01), DropRestitution()
+    told = problem.told_apart([spring], [rebound])
+    assert told.startswith("the arm is light against the shuttle (its inertia 0.")
+    assert "a tap on the arm with the hub clamped tells them apart" in told
+    assert problem.told_apart([rebound], [spring]) == told
+    assert problem.told_apart([spring], [DropOffset(0.03)]) == ""
+    trials = [
+        replace(t, arm_inertia_kgm2=t.mass_kg * t.arm_m**2)
+        for t in (*problem.fit_trials, *problem.held_trials)
+    ]
+    heavy = DropProblem(trials, load_drop_nominal(None, trials))
+    assert heavy.told_apart([spring], [rebound]) == ""

@@ -174,6 +174,27 @@ def test_a_shown_bounce_a_ringing_hub_spring_explains_alike_is_named_as_the_spri
         assert [name for name, _ in _declared_after(rebound, spring, ratio)] == ["restitution"]
 
 
+def test_the_spring_in_a_shown_rebounds_place_carries_the_rebounds_own_fit() -> None:
+    """Where the shown rebound yields to the ringing spring, the spring's step carries the
+    rebound's step (its fitted values go into the finding as the alternative, findings.
+    alike_fits); where it does not yield (a damped spring), there is no such step."""
+    spring = HubArmCompliance(loaded_inertia_kgm2=0.01)
+    shown = ShownRestitution(Bounces(struck_again=8, left=8, of=8, pause_s=0.008), rival=spring)
+    own = _given(shown, [], np.array([0.9, 5.2]), 1e-3)
+    base = Base(np.full(1000, 2e-3), 2e-3, 0.0, 1e-4, [], [])
+    for damping, yields in ((0.03, True), (0.3, False)):
+        loop = Discoverer.__new__(Discoverer)
+        loop._single = lambda e, p, c, b, d=damping, **_: _given(  # type: ignore[method-assign]
+            c, p, np.array([3.3, d]), 1.05e-3
+        )
+        other = loop._rival_instead([], [], shown, own, base)
+        if yields:
+            assert other is not None and other.added == [spring] and other.shown
+            assert other.alike == [own]
+        else:
+            assert other is None
+
+
 def test_a_shown_bounce_fitted_as_a_stiff_contacts_chatter_names_no_rebound() -> None:
     """A light arm springs back and throws the shuttle off a stiff contact for a few ms: the
     load cell shows it strike again, and the rebound fitted to it is small. Below e 0.17 it

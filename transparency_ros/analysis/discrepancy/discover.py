@@ -395,6 +395,7 @@ class Discoverer:
             return None
         other.shown = True
         other.alternatives = [cand.alike(own, step.rmse / other.rmse)]
+        other.alike = [step]  # (its fitted values in the finding: findings.alike_fits)
         return other
 
     def _finding(self, cand: Any, step: Step, base: Base, before: float, after: float) -> Any:
