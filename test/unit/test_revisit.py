@@ -298,3 +298,46 @@ def test_a_declared_effect_is_paired_with_every_single_not_only_the_best_alone(
     assert [[a.name for a in s.added] for s in steps] == [[n, "payload_gravity"] for n in names]
     assert all(s.alone_rmse == [single.rmse] for s, single in zip(steps, singles, strict=True))
     assert loop._with_declared([weight], singles, None) == []  # (nothing pending)
+
+
+def test_a_declared_effect_is_refitted_with_a_candidate_from_that_ones_own_start_too(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A candidate fitted without the declared weight may have gone where no fit with the
+    weight comes back from (zoo_12947: a b_v drift fitted as inertia and Coulomb scales): the
+    candidate it was made of is fitted with the weight from its own start as well, reduced
+    to the terms that drifted, and the fit of the lower cost is kept. Without its candidate,
+    or for one that chose from the data (a cogging's period), the single's fit alone."""
+    from transparency_ros.analysis.discrepancy import discover as d  # noqa: PLC0415
+
+    weight = _effect("payload_gravity", declared=True)
+    held = _effect("parameter_drift")  # what the drift reduces to
+    drift = _effect("parameter_drift", reduced=lambda _p: (held, np.array([1.5])))
+    alone = _effect("parameter_drift")  # the single: the drift reduced without the weight
+    wave = _effect("cogging", discrete_choices=1)
+    loop = Discoverer.__new__(Discoverer)
+    loop.problem = SimpleNamespace(
+        candidates=lambda: [weight, drift, wave], initial=lambda _c: np.ones(1)
+    )
+    fits: list[list[str]] = []
+
+    def refit(_p: object, effects: list[object], params: list[np.ndarray]) -> tuple:
+        fits.append([e.name + ("*" if e is held else "") for e in effects])
+        return list(params), object()
+
+    # the single's fit with the weight costs 2; the drift's own, held to its drifted term, 1
+    monkeypatch.setattr(d, "refit", refit)
+    monkeypatch.setattr(d, "fit_cost", lambda _p, effects, _x, _r: 1.0 if held in effects else 2.0)
+    base = SimpleNamespace(params=[])
+    single = SimpleNamespace(added=[alone], params=[np.array([3.3, 2.8])])
+    added, params, _ = loop._refit_from_either([], single, drift, weight, base)  # type: ignore[arg-type]
+    assert added == [held, weight] and np.allclose(params[0], [1.5])
+    assert fits == [
+        ["parameter_drift", "payload_gravity"],  # the single's fit
+        ["parameter_drift", "payload_gravity"],  # the drift from its own start
+        ["parameter_drift*", "payload_gravity"],  # held to the term that drifted
+    ]
+    for orig in (None, wave):
+        fits.clear()
+        added, _, _ = loop._refit_from_either([], single, orig, weight, base)  # type: ignore[arg-type]
+        assert added == [alone, weight] and len(fits) == 1
