@@ -307,7 +307,8 @@ def test_a_declared_effect_is_refitted_with_a_candidate_from_that_ones_own_start
     weight comes back from (zoo_12947: a b_v drift fitted as inertia and Coulomb scales): the
     candidate it was made of is fitted with the weight from its own start as well, reduced
     to the terms that drifted, and the fit of the lower cost is kept. Without its candidate,
-    or for one that chose from the data (a cogging's period), the single's fit alone."""
+    for one that chose from the data (a cogging's period), or beside a declared effect with
+    values of its own to fit (a shown rebound), the single's fit alone."""
     from transparency_ros.analysis.discrepancy import discover as d  # noqa: PLC0415
 
     weight = _effect("payload_gravity", declared=True)
@@ -341,3 +342,8 @@ def test_a_declared_effect_is_refitted_with_a_candidate_from_that_ones_own_start
         fits.clear()
         added, _, _ = loop._refit_from_either([], single, orig, weight, base)  # type: ignore[arg-type]
         assert added == [alone, weight] and len(fits) == 1
+    # a declared effect with values of its own (a shown rebound): the single's fit alone
+    shown = SimpleNamespace(name="restitution", fittable=True, declared=True)
+    fits.clear()
+    added, _, _ = loop._refit_from_either([], single, drift, shown, base)  # type: ignore[arg-type]
+    assert added == [alone, shown] and len(fits) == 1
