@@ -309,7 +309,7 @@ def test_a_declared_effect_is_refitted_with_a_candidate_from_that_ones_own_start
     to the terms that drifted, and the fit of the lower cost is kept. Without its candidate,
     for one that chose from the data (a cogging's period), or beside a declared effect with
     values of its own to fit (a shown rebound), the single's fit alone."""
-    from transparency_ros.analysis.discrepancy import discover as d  # noqa: PLC0415
+    from transparency_ros.analysis.discrepancy import pairs as d  # noqa: PLC0415
 
     weight = _effect("payload_gravity", declared=True)
     held = _effect("parameter_drift")  # what the drift reduces to
@@ -331,7 +331,7 @@ def test_a_declared_effect_is_refitted_with_a_candidate_from_that_ones_own_start
     monkeypatch.setattr(d, "fit_cost", lambda _p, effects, _x, _r: 1.0 if held in effects else 2.0)
     base = SimpleNamespace(params=[])
     single = SimpleNamespace(added=[alone], params=[np.array([3.3, 2.8])])
-    added, params, _ = loop._refit_from_either([], single, drift, weight, base)  # type: ignore[arg-type]
+    added, params, _ = d.refit_from_either(loop.problem, [], single, drift, weight, base=base)  # type: ignore[arg-type]
     assert added == [held, weight] and np.allclose(params[0], [1.5])
     assert fits == [
         ["parameter_drift", "payload_gravity"],  # the single's fit
@@ -340,10 +340,10 @@ def test_a_declared_effect_is_refitted_with_a_candidate_from_that_ones_own_start
     ]
     for orig in (None, wave):
         fits.clear()
-        added, _, _ = loop._refit_from_either([], single, orig, weight, base)  # type: ignore[arg-type]
+        added, _, _ = d.refit_from_either(loop.problem, [], single, orig, weight, base=base)  # type: ignore[arg-type]
         assert added == [alone, weight] and len(fits) == 1
     # a declared effect with values of its own (a shown rebound): the single's fit alone
     shown = SimpleNamespace(name="restitution", fittable=True, declared=True)
     fits.clear()
-    added, _, _ = loop._refit_from_either([], single, drift, shown, base)  # type: ignore[arg-type]
+    added, _, _ = d.refit_from_either(loop.problem, [], single, drift, shown, base=base)  # type: ignore[arg-type]
     assert added == [alone, shown] and len(fits) == 1

@@ -51,14 +51,18 @@ from transparency_ros.analysis.discrepancy.findings import (
 from transparency_ros.analysis.discrepancy.fitting import (
     aic,
     fit_candidate,
-    fit_cost,
     interval,
     parameter_count,
     refit,
     rmse,
 )
 from transparency_ros.analysis.discrepancy.model import FloatArray, NominalModel, Trial
-from transparency_ros.analysis.discrepancy.pairs import beyond_range, fitted_pairs, out_of_range
+from transparency_ros.analysis.discrepancy.pairs import (
+    beyond_range,
+    fitted_pairs,
+    out_of_range,
+    refit_from_either,
+)
 from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
 from transparency_ros.analysis.discrepancy.revisit import (
     friction_given_away,
@@ -435,7 +439,9 @@ class Discoverer:
                 # the single was fitted without the declared effect: refitted with it (a
                 # sensor's delay fitted without the weight left twice the floor, zoo_1019),
                 # from that fit and, given the candidate it was made of, from that one's start
-                added, joint, result = self._refit_from_either(effects, single, orig, cand, base)
+                added, joint, result = refit_from_either(
+                    self.problem, effects, single, orig, cand, base=base
+                )
                 step = self._step(effects, joint, added, result, base)
                 if result is None:  # no better: the single's fit
                     step.result, step.joint = single.result, single.joint
@@ -444,44 +450,6 @@ class Discoverer:
                 step.alone_rmse, step.alone_aic = [single.rmse], [single.aic]
                 out.append(step)
         return out
-
-    def _refit_from_either(
-        self, effects: list[Any], single: Step, orig: Any, cand: Any, base: Base
-    ) -> tuple[list[Any], list[FloatArray], Any]:
-        """``single`` (fitted without the declared ``cand``) with ``cand``, all refitted from
-        the single's fit; where ``cand`` has nothing to fit (its size is what the recording
-        declares: the shuttle's weight), also the candidate ``single`` was made of (``orig``;
-        None: not known) fitted with it from its own start (the model found so far at its
-        values) and reduced to its terms that drifted; the fit of the lower cost is kept:
-        (added effects, parameters, least-squares result). Fitted without known physics, a
-        candidate may have gone where no fit with it comes back from (zoo_12947: a b_v drift
-        x1.56 fitted without the shuttle's weight as an inertia x3.3 and a Coulomb torque
-        x2.8, with the weight both at their bounds; fitted with the weight, b_v x1.56 at the
-        noise floor). A declared effect with values of its own to fit (a rebound the load
-        cell shows) makes the two a pair of unknowns, which the pairs search (its own start
-        for each) is for: given the second start too, a shown rebound was named as a pair
-        with a stiction of 1.03 N m, and a hub spring it had given way to was kept (zoo_12911,
-        development seeds 12900-12999). A candidate that chooses from the data (a cogging's
-        period) keeps the single's fit: its start is that choice."""
-        problem = self.problem
-        added = [*single.added, cand]
-        params, result = refit(problem, [*effects, *added], [*single.params, problem.initial(cand)])
-        fits = [(added, params, result)]
-        known = not getattr(cand, "fittable", True)
-        if known and orig is not None and not getattr(orig, "discrete_choices", 0):
-            own = [orig, cand]
-            start = [*base.params, problem.initial(orig), problem.initial(cand)]
-            params, result = refit(problem, [*effects, *own], start)
-            smaller = getattr(orig, "reduced", lambda _p: None)(params[len(effects)])
-            if smaller is not None:  # (the terms that did not drift held)
-                own = [smaller[0], cand]
-                start = [*params[: len(effects)], smaller[1], params[-1]]
-                params, result = refit(problem, [*effects, *own], start)
-            if result is not None:  # (no better than nominal: nothing to offer)
-                fits.append((own, params, result))
-        if len(fits) == 1:
-            return fits[0]
-        return min(fits, key=lambda f: fit_cost(problem, [*effects, *f[0]], f[1], f[2]))
 
     def _single(
         self,
