@@ -475,6 +475,55 @@ def test_a_phase_above_the_leftover_is_unexplained_where_the_whole_residual_is_n
     assert unexplained_phases(problem, err) == {}  # type: ignore[arg-type]
 
 
+def test_one_sensors_error_above_its_own_floor_is_unexplained_where_the_pooled_is_not() -> None:
+    """zoo_13118 (an offset of -0.032 N m hidden, nothing named): the encoder's held-out error
+    was 8x its own floor, the pooled error within the floor the heights' noise sets, and the
+    report said nothing was left. Now it says so, on that sensor, in the phase holding most
+    of it, with the candidate that came closest; not where a phase is unexplained pooled, and
+    not where the sensor is within LEFTOVER times its floor."""
+    from transparency_ros.analysis.discrepancy.findings import (  # noqa: PLC0415
+        LEFTOVER,
+        MIN_PHASE,
+        leftover,
+    )
+
+    n = 400
+    encoder = np.arange(n) < 2 * MIN_PHASE
+    impact = np.arange(n) < MIN_PHASE // 2  # a quarter of the encoder's elements
+    pooled_floor, own_floor = 10.0, 0.1
+    err = np.full(n, 9.0)  # the heights: within their floor pooled, below LEFTOVER of it
+    err[encoder] = 0.2
+    err[impact] = 2.0  # the encoder's error sits at the impact
+
+    def scope(e: np.ndarray) -> tuple[np.ndarray, float] | None:
+        return (encoder, own_floor) if np.sqrt(np.mean(e[encoder] ** 2)) > 1.5 * own_floor else None
+
+    problem = SimpleNamespace(
+        noise_floor=lambda: pooled_floor,
+        phases=lambda: {"impact": impact, "deflection": ~impact},
+        leftover_scope=scope,
+        scoped_sensor="encoder",
+        residual_peak_hz=lambda *_a: 40.0,
+    )
+    (entry,) = leftover(problem, err, closest=("torque_offset", 0.74))  # type: ignore[arg-type]
+    own = float(np.sqrt(np.mean(err[encoder] ** 2)))
+    assert own > LEFTOVER * own_floor
+    assert entry["where"] == {"phase": "impact", "sensor": "encoder"}
+    assert entry["rmse_rad"] == pytest.approx(own)
+    assert entry["noise_floor_rad"] == own_floor
+    assert entry["dominant_frequency_hz"] is None  # the pooled residual's peak is not its
+    assert f"encoder's residual {own / own_floor:.0f}x its own noise floor" in entry["looks_like"]
+    assert "torque_offset, would remove 74%" in entry["looks_like"]
+    # within LEFTOVER times its floor: nothing is said
+    err[encoder] = 0.9 * LEFTOVER * own_floor
+    assert leftover(problem, err) == []  # type: ignore[arg-type]
+    # a phase unexplained pooled is said as before, and the sensor's part is not added
+    err[impact] = 2.0
+    err[~encoder] = 2 * LEFTOVER * pooled_floor
+    found = leftover(problem, err)  # type: ignore[arg-type]
+    assert [e["where"] for e in found] == [{"phase": "deflection"}]
+
+
 def test_a_step_judged_on_an_error_at_its_floor_already_removes_a_share_of_all_of_it() -> None:
     """A sensor's effect is judged on that sensor's error and floor: the share of the error
     above the floor it removes. Where that error is at or under its floor already, the floor

@@ -182,6 +182,8 @@ class _Set:
 class DropProblem:
     """Drop-test trials of one actuator against eq. (2)."""
 
+    scoped_sensor = "encoder"  # the sensor leftover_scope judges alone (findings.leftover)
+
     def __init__(
         self,
         trials: Sequence[DropTrial],
