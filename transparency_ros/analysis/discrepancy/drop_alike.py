@@ -47,9 +47,11 @@ def told_apart(
             "Coulomb torque is a constant torque: a trial in which it turns back (a drop "
             "that rebounds, or the drive moving it both ways) tells them apart"
         )
+    if kinds != {"rebound", "hub spring"}:
+        return ""
     trials = (*problem.fit_trials, *problem.held_trials)
     share = float(np.mean([t.arm_inertia_kgm2 / (t.mass_kg * t.arm_m**2) for t in trials]))
-    if kinds == {"rebound", "hub spring"} and share < LIGHT_ARM:
+    if share < LIGHT_ARM:
         return (
             f"the arm is light against the shuttle (its inertia {share:.2g} of the "
             "shuttle's m r^2 at the tip), so a contact that rebounds and a spring between "
