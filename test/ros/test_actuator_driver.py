@@ -529,6 +529,9 @@ def test_one_silent_motor_among_several(driver_factory: Any, policy: str) -> Non
         response = probe.call(SetBool, "/actuator_driver/enable", SetBool.Request(data=True))
         assert not response.success and "knee" in response.message
         assert not any(sim.enabled())
+        # disabling says which motor did not answer it (whether it took it is unknown)
+        response = probe.call(SetBool, "/actuator_driver/enable", SetBool.Request(data=False))
+        assert not response.success and response.message == "disable sent, no answer from knee"
         sim.silence(1, False)
         response = probe.call(SetBool, "/actuator_driver/enable", SetBool.Request(data=True))
         assert response.success, response.message

@@ -293,13 +293,17 @@ class ControlLoop(PeriodicLoop):
             self.core.activate(feedback.position_rad)
             return feedback
 
-    def disable(self) -> None:
-        """Zero torque and motor off. Safe to call at any time, from any thread, repeatedly."""
+    def disable(self, timeout_s: float = 0.05) -> bool:
+        """Zero torque and motor off. Safe to call at any time, from any thread, repeatedly.
+        Whether the motor answered within ``timeout_s`` (the frames end with a request for its
+        state); False: whether it took the disable is unknown, or no bus."""
         with self.lock:
             self.core.deactivate()
-            if self.client.bus is not None:
-                self.client.send(self.client.protocol.disable_frames())
-                self.client.receive(0.02)
+            if self.client.bus is None:
+                return False
+            self.client.drain()  # (replies to earlier requests: not an answer to this one)
+            self.client.send(self.client.protocol.disable_frames())
+            return self.client.receive(timeout_s) is not None
 
     def set_zero(self, timeout_s: float = 0.1, quiet_s: float = 0.005) -> bool:
         """Make the current position read zero, then hold there.

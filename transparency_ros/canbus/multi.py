@@ -228,15 +228,26 @@ class MultiControlLoop(PeriodicLoop):
                     missing.append(motor.name)
             return missing
 
-    def disable(self) -> None:
-        """Zero torque and motor off for every motor. Safe at any time, repeatedly."""
+    def disable(self, timeout_s: float = 0.05, quiet_s: float = 0.005) -> list[str]:
+        """Zero torque and motor off for every motor. Safe at any time, repeatedly. Waits up
+        to ``timeout_s`` for a reply from each motor sent the frames (they end with a request
+        for its state, answered after the device took the disable: frames are taken in order),
+        then until its bus is quiet for ``quiet_s``. Returns the motors that did not answer:
+        whether they took the disable is unknown (a busy computer, a device off the bus)."""
         with self.lock:
+            since = WALL(self.clock())
+            sent = set()
             for i, motor in enumerate(self.motors):
                 motor.core.deactivate()
                 if self.clients[motor.bus].bus is not None:
                     self._send(i, motor.protocol.disable_frames())
-            time.sleep(0.005)
-            self._drain(float("inf"))
+                    sent.add(i)
+            deadline = self.clock() + timeout_s
+            got = self._collect(sent, deadline, since)
+            while got.replies and self.clock() < deadline + timeout_s:
+                if not self._collect(sent, self.clock() + quiet_s, since).replies:
+                    break  # the buses are quiet: the newest reply of each taken
+            return [self.motors[i].name for i in sorted(sent - got.replies.keys())]
 
     def set_zero(self, timeout_s: float = 0.1, quiet_s: float = 0.005) -> list[str]:
         """Make every motor's current position read zero, then hold there. A motor's answer is

@@ -130,8 +130,10 @@ def test_commands_move_the_simulated_joint(rig: tuple[str, ControlLoop, Simulate
     assert wait_for(lambda: loop.stats().cycles > 50), loop.stats()
     assert loop.client.counters.malformed == 0
     loop.stop()
-    loop.disable()
+    assert loop.disable(), "no answer to disable"
     assert wait_for(lambda: sim.events[EXIT_EVENT[name]] >= 1), sim.events
+    sim.silence()
+    assert not loop.disable(timeout_s=0.02), "a silent motor's disable said answered"
 
 
 def test_silent_bus_trips_the_fault_after_the_configured_silence(

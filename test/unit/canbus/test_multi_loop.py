@@ -172,8 +172,26 @@ def test_enable_names_the_motor_that_does_not_answer(robot: Robot) -> None:
     sim.silence(device)
     assert robot.loop.enable(timeout_s=0.05) == ["j2"]
     assert robot.loop.motors[1].core.mode is DriverMode.FAULT
-    robot.loop.disable()
+    # disable names the motor that did not answer it either (whether it took it is unknown)
+    assert robot.loop.disable() == ["j2"]
     assert not any(sim.enabled())
+
+
+@pytest.mark.parametrize(
+    "robot", [(p, [1, 2, 3], 1, "all") for p in ("mit", "odrive", "moteus")],
+    indirect=True, ids=["mit", "odrive", "moteus"],
+)  # fmt: skip
+def test_disable_waits_for_every_motors_answer(robot: Robot) -> None:
+    loop = robot.loop
+    assert loop.enable() == []
+    loop.start()
+    assert wait_for(lambda: len(robot.samples) > 10)
+    loop.stop()
+    assert loop.disable() == []
+    assert all(m.core.mode is DriverMode.INACTIVE for m in loop.motors)
+    # (the answer follows the disable on the wire, but may be one to the loop's last request:
+    # the simulated motors' thread can lag this process; a real motor takes frames in order)
+    assert wait_for(lambda: not any(any(sim.enabled()) for sim in robot.sims), 1.0)
 
 
 @pytest.mark.parametrize("robot", [("mit", [1, 2], 1, "all")], indirect=True)

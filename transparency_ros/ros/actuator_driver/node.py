@@ -354,7 +354,7 @@ class ActuatorDriverNode(CommandInput, LifecycleNode):
         silent = self._enable()
         if silent:
             self.get_logger().error(f"activate failed: no answer to enable from {silent}")
-            self.loop.disable()
+            self._disable()
             return TransitionCallbackReturn.FAILURE
         self.loop.start()
         motors = "motor" if isinstance(self.loop, ControlLoop) else f"{len(self.cores)} motors"
@@ -386,10 +386,27 @@ class ActuatorDriverNode(CommandInput, LifecycleNode):
         assert loop is not None
         return "" if loop.enable() is not None else self.values["joint_name"]
 
+    def _disable(self) -> str:
+        """Disable the motor(s); the ones that did not answer, or ''. (A motor that did not
+        answer was sent the frames; whether it took them is unknown: said in the log.)"""
+        loop = self.loop
+        if loop is None:
+            return ""
+        if isinstance(loop, MultiControlLoop):
+            silent = ", ".join(loop.disable())
+        else:
+            silent = "" if loop.disable() else self.values["joint_name"]
+        if silent:
+            self.get_logger().warning(
+                f"disable sent, no answer from {silent}: whether it took it is unknown "
+                "(check the motor; its own watchdog is the last line)"
+            )
+        return silent
+
     def _stop_and_disable(self) -> None:
         if self.loop is not None:
             self.loop.stop()
-            self.loop.disable()
+            self._disable()
 
     def _close(self) -> None:
         self._stop_and_disable()
@@ -514,11 +531,16 @@ class ActuatorDriverNode(CommandInput, LifecycleNode):
             if response.success:
                 loop.start()
             else:
-                loop.disable()
+                self._disable()
             response.message = "enabled" if response.success else f"no answer from {silent}"
         else:
-            loop.disable()
-            response.success, response.message = True, "zero torque, motor mode off"
+            silent = self._disable()
+            response.success = not silent
+            response.message = (
+                f"disable sent, no answer from {silent}"
+                if silent
+                else "zero torque, motor mode off"
+            )
         self.publish_diagnostics()
         return response
 
