@@ -106,8 +106,7 @@ def analyse(campaign: Path) -> dict[str, Any]:
         pointed = sorted({
             name
             for u in report.unexplained
-            for name in str(u.get("closest_candidate", {}).get("effect", "")).split(" + ")
-            if name
+            for name in u.get("closest_candidate", {}).get("effects", [])
         })  # fmt: skip
         # (what the report says besides its findings: a decision taken again on the final
         # model, revisit.py, says so here; read afterwards, no re-run needed)

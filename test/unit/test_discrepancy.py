@@ -505,7 +505,7 @@ def test_one_sensors_error_above_its_own_floor_is_unexplained_where_the_pooled_i
         scoped_sensor="encoder",
         residual_peak_hz=lambda *_a: 40.0,
     )
-    (entry,) = leftover(problem, err, closest=("torque_offset", 0.74))  # type: ignore[arg-type]
+    (entry,) = leftover(problem, err, closest=(["torque_offset"], 0.74))  # type: ignore[arg-type]
     own = float(np.sqrt(np.mean(err[encoder] ** 2)))
     assert own > LEFTOVER * own_floor
     assert entry["where"] == {"phase": "impact", "sensor": "encoder"}
@@ -513,6 +513,9 @@ def test_one_sensors_error_above_its_own_floor_is_unexplained_where_the_pooled_i
     assert entry["noise_floor_rad"] == own_floor
     assert entry["dominant_frequency_hz"] is None  # the pooled residual's peak is not its
     assert f"encoder's residual {own / own_floor:.0f}x its own noise floor" in entry["looks_like"]
+    assert entry["closest_candidate"] == {
+        "effect": "torque_offset", "effects": ["torque_offset"], "share_removed": 0.74,
+    }  # fmt: skip
     assert "torque_offset, would remove 74%" in entry["looks_like"]
     # within LEFTOVER times its floor: nothing is said
     err[encoder] = 0.9 * LEFTOVER * own_floor

@@ -158,6 +158,7 @@ def test_friction_outside_the_library_is_left_unexplained_with_the_closest_candi
     assert report.unexplained
     closest = report.unexplained[0]["closest_candidate"]
     assert 0 < closest["share_removed"] < 0.75
+    assert closest["effect"] == " + ".join(closest["effects"]) and closest["effects"]
     assert "too little to name" in report.unexplained[0]["looks_like"]
 
 

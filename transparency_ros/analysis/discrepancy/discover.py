@@ -163,7 +163,7 @@ class Discoverer:
             held_err,
             effects,
             params,
-            None if closest is None else (" + ".join(c.name for c in closest.added), closest.gain),
+            None if closest is None else ([c.name for c in closest.added], closest.gain),
         )
         report.seconds = time.perf_counter() - started
         return report

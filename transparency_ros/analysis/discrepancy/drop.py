@@ -295,6 +295,11 @@ class DropProblem:
         return s.error_many([self.physics(effects, params, s.trials) for params in param_sets])
 
     def phases(self) -> dict[str, BoolArray]:
+        return dict(self._phases)
+
+    @cached_property
+    def _phases(self) -> dict[str, BoolArray]:
+        """The held-out elements' motion phases (made once: the report asks several times)."""
         masks: dict[str, list[BoolArray]] = {name: [] for name in PHASES}
         for i, _piece, t in self.held.layout():
             trial = self.held.trials[i]
@@ -349,6 +354,11 @@ class DropProblem:
         n_q = sum(q.size for _, q in self.fit.q)
         n_h = sum(h.size for _, h in self.fit.h) + sum(h.size for _, h in self.fit.fall)
         return float(math.sqrt((n_q * q_noise**2 + n_h * h_noise**2) / max(1, n_q + n_h)))
+
+    @property
+    def encoder_noise_rad(self) -> float:
+        """The encoder's noise at rest [rad] (its readings before contact)."""
+        return self._sensor_noise[0]
 
     @cached_property
     def _sensor_noise(self) -> tuple[float, float]:

@@ -67,7 +67,7 @@ def turned_back(problem: DropProblem) -> int:
     had turned (the strike turns it to negative theta, as analysed) by more than two
     counts of the encoder or three times its noise at rest. (Not the phases' reversals:
     the speed of an arm creeping count by count changes sign in its readings' noise.)"""
-    least = max(2 * problem.encoder_count, 3 * problem._sensor_noise[0])
+    least = max(2 * problem.encoder_count, 3 * problem.encoder_noise_rad)
     turned = 0
     for t in (*problem.fit_trials, *problem.held_trials):
         q = t.q[t.t_q > t.contact_s]

@@ -302,11 +302,12 @@ def leftover(
     err: FloatArray,
     effects: Sequence[Any] = (),
     params: Sequence[FloatArray] = (),
-    closest: tuple[str, float] | None = None,
+    closest: tuple[Sequence[str], float] | None = None,
 ) -> list[dict[str, Any]]:
     """Structure the found effects do not explain: a phase whose residual is well above the
     noise floor, with the frequency where the residual has most power, and the candidate
-    that came closest: ``closest`` = (its name, the share it would have removed); where no
+    that came closest: ``closest`` = (its effects' names: one, or a pair fitted jointly; the
+    share it would have removed); where no
     phase is so and one sensor's error is above its own floor (``sensor_leftover``), that."""
     floor = problem.noise_floor()
     found: list[tuple[dict[str, Any], str]] = [
@@ -342,8 +343,10 @@ def leftover(
             f"; the residual peaks near {peak:.1f} Hz" if pooled and not math.isnan(peak) else ""
         )
         if closest is not None and closest[1] > 0:
-            names, gain = closest
-            entry["closest_candidate"] = {"effect": names, "share_removed": gain}
+            names, gain = " + ".join(closest[0]), closest[1]
+            entry["closest_candidate"] = {
+                "effect": names, "effects": list(closest[0]), "share_removed": gain,
+            }  # fmt: skip
             entry["looks_like"] += (
                 f"; the closest candidate, {names}, would remove {gain:.0%} of "
                 "it, too little to name"
