@@ -210,10 +210,30 @@ def test_an_effect_says_whether_it_is_the_rigid_bodys_as_its_inertial_change_doe
     for cand in problem.candidates():
         for p in (cand.start, 0.5 * (np.array(cand.lower) + np.array(cand.upper))):
             change = cand.inertial(np.asarray(p, dtype=float), nominal)
-            assert (change is not None) == cand.rigid_body, cand.name
+            # (a rotor's inertia is carried as the model's armature, not a link's change)
+            carried = change is not None or cand.kind == "armature"
+            assert carried == cand.rigid_body, cand.name
         kinds.add((cand.kind, cand.rigid_body))
     assert ("payload", True) in kinds and ("parameter_drift", True) in kinds
-    assert ("coulomb_friction", False) in kinds
+    assert ("armature", True) in kinds and ("coulomb_friction", False) in kinds
+
+
+def test_a_rotors_inertia_the_urdf_lacks_is_named_as_the_joints_armature(
+    urdf: RobotModel,
+) -> None:
+    """The elbow's rotor (reflected inertia gr^2 I_r, which a URDF has no place for) is named
+    armature[j1] with its size; given in the nominal model (as --nominal gives it), the
+    balance carries it and nothing is named."""
+    import pinocchio as pin  # noqa: PLC0415
+
+    pm = pin.Model(urdf.pin_model)
+    pm.armature = np.array([0.0, 0.004])
+    rotor = RobotModel(pm, urdf.friction, "chain with a rotor", [])
+    recordings = runs(rotor, urdf.joint_names)
+    named = found(RobotProblem(urdf, recordings))
+    assert set(named) == {"armature[j1]"}, named
+    assert named["armature[j1]"]["armature_kgm2"] == pytest.approx(0.004, rel=0.1)
+    assert found(RobotProblem(rotor, recordings)) == {}
 
 
 def test_a_coarse_encoders_lattice_is_read_off_the_positions_and_named(urdf: RobotModel) -> None:

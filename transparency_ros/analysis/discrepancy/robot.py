@@ -112,6 +112,7 @@ class _Run:
     t: FloatArray  # compared instants [s]
     q: FloatArray  # (samples, joints)
     v: FloatArray  # low-passed as the command is
+    a: FloatArray  # (samples, joints) accelerations, low-passed as the command is
     regressor: FloatArray  # (samples, joints, 10 * joints)
     sliding: FloatArray  # (samples, joints) tanh(q' / eps), low-passed as the command is
     command_t: FloatArray  # the recorded command's instants [s]
@@ -161,9 +162,12 @@ class RobotProblem:
         # the joints with a command (a pendubot's elbow has none)
         self.driven = np.any([np.any(r.command != 0.0, axis=0) for r in self.fit_runs], axis=0)
         fastest = np.max([np.max(np.abs(r.v), axis=0) for r in self.fit_runs], axis=0)
+        # (an acceleration most samples stay under: a single spike does not set the bound)
+        brisk = np.percentile(np.abs(np.concatenate([r.a for r in self.fit_runs])), 99, axis=0)
         self._candidates = library(
-            tuple(model.joint_names), largest, fastest, _axes(pm), _moved_kg(pm)
-        ) + self._lattices(runs)
+            tuple(model.joint_names), largest, fastest, _axes(pm), _moved_kg(pm),
+            rotors=(np.asarray(pm.armature, dtype=float), brisk),
+        ) + self._lattices(runs)  # fmt: skip
         self.min_improvement = 0.5  # as the torque-driven 1-DoF problem's
         self.nominal = {
             f"{kind}[{name}]": float(value)
@@ -234,10 +238,17 @@ class RobotProblem:
         # command's path nor the nominal terms (``balance`` adds to them)
         applied = _low_pass(np.stack([np.interp(grid, t, c) for c in command.T], axis=1))[keep]
         friction = self.model.friction
-        nominal = regressor @ self.pi + friction.viscous * v[keep] + friction.coulomb * sliding
+        # (the rotors' reflected inertia, a joint's armature, is not in Pinocchio's regressor)
+        acceleration = _low_pass(a)[keep]
+        nominal = (
+            regressor @ self.pi
+            + np.asarray(pm.armature, dtype=float) * acceleration
+            + friction.viscous * v[keep]
+            + friction.coulomb * sliding
+        )
         return _Run(
-            rec.name, grid[keep], q[keep], v[keep], regressor, sliding, t, command, grid, keep,
-            applied, nominal, q, v_wide,
+            rec.name, grid[keep], q[keep], v[keep], acceleration, regressor, sliding, t,
+            command, grid, keep, applied, nominal, q, v_wide,
         )  # fmt: skip
 
     def _floors(self, recordings: Sequence[JointRecording]) -> FloatArray:
@@ -328,6 +339,7 @@ class RobotProblem:
         model = run.nominal
         ctx = Context(
             run.v,
+            run.a,
             run.sliding,
             run.regressor,
             self.pi,
@@ -391,6 +403,7 @@ class RobotProblem:
 
     def _acting_rows(self, effect: Any) -> set[int]:
         if effect.stage == "command" or effect.kind in {
+            "armature",
             "torque_offset",
             "coulomb_friction",
             "viscous_friction",

@@ -41,6 +41,7 @@ class Context:
     """What an effect may change in one run's torque balance."""
 
     v: FloatArray  # (samples, joints) joint speeds on the compared grid
+    a: FloatArray  # (samples, joints) joint accelerations there
     sliding: FloatArray  # (samples, joints) the Coulomb law's tanh(q' / eps), smoothed
     regressor: FloatArray  # (samples, joints, 10 * links): tau = Y pi
     nominal: FloatArray  # (10 * links,) the nominal inertial parameters
@@ -375,6 +376,32 @@ class ParameterDrift(_JointEffect):
         return out
 
 
+class Armature(_JointEffect):
+    """The inertia of the joint's rotor, reflected through its gearbox (gr^2 I_rotor), that the
+    model lacks (negative: it has too much; at most all of the model's own): a torque
+    ``armature_kgm2`` q'' on the joint's own row. A URDF has no place for it (Pinocchio's
+    ``armature``; the DFKI lab's parameter file gives it, their URDF does not), and a link's
+    inertia does not take it up past the first joint: a link's rotational inertia acts on
+    the rows of its joint and every joint above it, a rotor's on its own joint's alone. (On
+    the first joint of a chain the two are one term: the report says so, explained alike.)"""
+
+    rigid_body = True  # (carried by a simulator as the model's armature: robot_shooting)
+
+    def __init__(self, joint: int, name: str, nominal_kgm2: float, most_kgm2: float) -> None:
+        top = max(most_kgm2, 1e-9)
+        super().__init__(
+            "armature", joint, name, ("armature_kgm2",), (-max(nominal_kgm2, 0.0),), (top,),
+            (0.0,), (0.0,),
+        )  # fmt: skip
+
+    def torque(self, ctx: Context, p: FloatArray) -> FloatArray:
+        return self._one(ctx, float(p[0]) * ctx.a[:, self.index])
+
+    def armature(self, p: FloatArray) -> float:
+        """What the joint's armature gains [kg m^2]."""
+        return float(p[0])
+
+
 class EncoderLattice(_JointEffect):
     """The joint's positions recorded on a lattice of ``step_rad`` (an encoder's counts), read
     off the recordings (:func:`lattice_step`), not fitted: a simulator that leaves the lattice
@@ -458,12 +485,16 @@ def library(
     fastest: FloatArray,
     axes: list[FloatArray | None] | None = None,
     moved_kg: FloatArray | None = None,
+    *,
+    rotors: tuple[FloatArray, FloatArray] | None = None,
 ) -> list[Any]:
     """Every candidate for a robot with ``joints``, whose torques (command or model) reach
     ``largest_nm`` and speeds ``fastest`` [rad/s] (the bounds of the torques' sizes); ``axes``:
     each joint's axis of rotation in its link's frame (None: a prismatic joint, or unknown);
     ``moved_kg``: the mass each joint moves (its links and all after them; the payload's
-    bound)."""
+    bound); ``rotors``: each joint's armature in the model [kg m^2] and the acceleration
+    its motion stays under [rad/s^2] (the armature's bound: a rotor whose torque there
+    reaches the joint's largest; None: no armature candidate)."""
     out: list[Any] = [CommandDelay(), CommandDelay("sensor_delay")]
     for j, name in enumerate(joints):
         top = float(largest_nm[j])
@@ -484,6 +515,9 @@ def library(
             ParameterDrift(j, name, "mass_scale"),
             ParameterDrift(j, name, "inertia_scale"),
         ]
+        if rotors is not None:
+            nominal, brisk = rotors
+            out.append(Armature(j, name, float(nominal[j]), top / max(float(brisk[j]), 1e-3)))
     return out
 
 

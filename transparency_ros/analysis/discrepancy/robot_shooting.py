@@ -34,16 +34,20 @@ Fitted = Sequence[tuple[Any, FloatArray]]  # (effect, parameters), as a report's
 
 def carrying(base: RobotModel, fitted: Fitted) -> RobotModel:
     """``base`` with the inertial effects of ``fitted`` (payloads, a link's drift) in its
-    links' inertial parameters."""
+    links' inertial parameters, and the rotors' (armature) in its joints'."""
     import pinocchio as pin  # noqa: PLC0415
 
     pm = pin.Model(base.pin_model)
     nominal = np.concatenate([pm.inertias[j].toDynamicParameters() for j in range(1, base.dof + 1)])
     pi = nominal.copy()
+    armature = np.array(pm.armature, dtype=float)
     for effect, p in fitted:
         change = effect.inertial(p, nominal)
         if change is not None:
             pi += change
+        if effect.kind == "armature":  # (a rotor's inertia: the joint's own, not a link's)
+            armature[effect.joint] += effect.armature(p)
+    pm.armature = armature
     for j in range(base.dof):
         pm.inertias[j + 1] = pin.Inertia.FromDynamicParameters(pi[10 * j : 10 * j + 10])
     return RobotModel(pm, base.friction, f"{base.source} + named effects", list(base.notes))
@@ -70,6 +74,7 @@ def felt_torque(base: RobotModel, fitted: Fitted, q: FloatArray, v: FloatArray) 
     ``q``, ``v`` (samples, joints): what the model's side of the balance gains."""
     ctx = Context(
         v,
+        np.zeros(v.shape),  # (the only effect using it, the armature, is in the model)
         np.tanh(v / base.friction.smoothing_rad_s),
         np.zeros((*q.shape, 0)),  # inertial effects are in the model (``carrying``), not here
         np.zeros(0),
