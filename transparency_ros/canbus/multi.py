@@ -228,12 +228,12 @@ class MultiControlLoop(PeriodicLoop):
                     missing.append(motor.name)
             return missing
 
-    def disable(self, timeout_s: float = 0.05, quiet_s: float = 0.005) -> list[str]:
+    def disable(self, timeout_s: float = 0.05) -> list[str]:
         """Zero torque and motor off for every motor. Safe at any time, repeatedly. Waits up
         to ``timeout_s`` for a reply from each motor sent the frames (they end with a request
         for its state, answered after the device took the disable: frames are taken in order),
-        then until its bus is quiet for ``quiet_s``. Returns the motors that did not answer:
-        whether they took the disable is unknown (a busy computer, a device off the bus)."""
+        then takes what else has come. Returns the motors that did not answer: whether they
+        took the disable is unknown (a busy computer, a device off the bus)."""
         with self.lock:
             since = WALL(self.clock())
             sent = set()
@@ -242,11 +242,8 @@ class MultiControlLoop(PeriodicLoop):
                 if self.clients[motor.bus].bus is not None:
                     self._send(i, motor.protocol.disable_frames())
                     sent.add(i)
-            deadline = self.clock() + timeout_s
-            got = self._collect(sent, deadline, since)
-            while got.replies and self.clock() < deadline + timeout_s:
-                if not self._collect(sent, self.clock() + quiet_s, since).replies:
-                    break  # the buses are quiet: the newest reply of each taken
+            got = self._collect(sent, self.clock() + timeout_s, since)
+            self._drain(float("inf"))
             return [self.motors[i].name for i in sorted(sent - got.replies.keys())]
 
     def set_zero(self, timeout_s: float = 0.1, quiet_s: float = 0.005) -> list[str]:

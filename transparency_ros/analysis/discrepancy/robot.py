@@ -146,6 +146,8 @@ class RobotProblem:
             len(runs) - 1
         ]
         pm = model.pin_model
+        # (the rotors' reflected inertia, a joint's armature, is not in Pinocchio's regressor)
+        self.armature = np.asarray(pm.armature, dtype=float)
         self.pi = np.concatenate(
             [pm.inertias[j].toDynamicParameters() for j in range(1, model.dof + 1)]
         )
@@ -166,7 +168,7 @@ class RobotProblem:
         brisk = np.percentile(np.abs(np.concatenate([r.a for r in self.fit_runs])), 99, axis=0)
         self._candidates = library(
             tuple(model.joint_names), largest, fastest, _axes(pm), _moved_kg(pm),
-            rotors=(np.asarray(pm.armature, dtype=float), brisk),
+            rotors=(self.armature, brisk),
         ) + self._lattices(runs)  # fmt: skip
         self.min_improvement = 0.5  # as the torque-driven 1-DoF problem's
         self.nominal = {
@@ -238,11 +240,10 @@ class RobotProblem:
         # command's path nor the nominal terms (``balance`` adds to them)
         applied = _low_pass(np.stack([np.interp(grid, t, c) for c in command.T], axis=1))[keep]
         friction = self.model.friction
-        # (the rotors' reflected inertia, a joint's armature, is not in Pinocchio's regressor)
         acceleration = _low_pass(a)[keep]
         nominal = (
             regressor @ self.pi
-            + np.asarray(pm.armature, dtype=float) * acceleration
+            + self.armature * acceleration
             + friction.viscous * v[keep]
             + friction.coulomb * sliding
         )

@@ -112,6 +112,11 @@ class RobotEffect:
         effect is not one (its torque is not the rigid body's)."""
         return None
 
+    def armature(self, p: FloatArray) -> float | None:
+        """What this effect adds to its joint's armature [kg m^2], for a model that carries
+        it; None: the effect is not a rotor's inertia."""
+        return None
+
 
 class CommandDelay(RobotEffect):
     """The motors act on the command ``delay_s`` late (the current loop, the bus); negative:
@@ -383,7 +388,7 @@ class Armature(_JointEffect):
     ``armature``; the DFKI lab's parameter file gives it, their URDF does not), and a link's
     inertia does not take it up past the first joint: a link's rotational inertia acts on
     the rows of its joint and every joint above it, a rotor's on its own joint's alone. (On
-    the first joint of a chain the two are one term: the report says so, explained alike.)"""
+    the first joint of a chain the two are one term of the balance.)"""
 
     rigid_body = True  # (carried by a simulator as the model's armature: robot_shooting)
 

@@ -45,8 +45,9 @@ def carrying(base: RobotModel, fitted: Fitted) -> RobotModel:
         change = effect.inertial(p, nominal)
         if change is not None:
             pi += change
-        if effect.kind == "armature":  # (a rotor's inertia: the joint's own, not a link's)
-            armature[effect.joint] += effect.armature(p)
+        rotor = effect.armature(p)  # (a rotor's inertia: the joint's own, not a link's)
+        if rotor is not None:
+            armature[effect.joint] += rotor
     pm.armature = armature
     for j in range(base.dof):
         pm.inertias[j + 1] = pin.Inertia.FromDynamicParameters(pi[10 * j : 10 * j + 10])
