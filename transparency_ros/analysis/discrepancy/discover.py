@@ -84,6 +84,7 @@ from transparency_ros.analysis.discrepancy.steps import (
     scan_facts,
     share_needed,
     share_removed,
+    short_of_floor,
     stood_in,
     total,
 )
@@ -546,7 +547,9 @@ class Discoverer:
         it is judged on, see _judged), improves the information criterion by 10, every effect
         in it is meaningful (no drift scales near 1, no fit against a bound, no rebound below
         what it shows) and its interval excludes its null value; a pair also beats each of
-        its members alone by 10. A missing effect that is really there explains most of what
+        its members alone by 10; where the problem searches below SIGNIFICANT times the floor
+        (``to_the_floor``), a step judged there takes it down to the floor
+        (``short_of_floor``). A missing effect that is really there explains most of what
         is left; one that stands in for something else explains part of it."""
         return (
             step.meaningful
@@ -555,6 +558,7 @@ class Discoverer:
             and step.gain >= self._share(step, share)
             and step.aic < base.aic - 10
             and all(step.aic < a - 10 for a in step.alone_aic)
+            and not (getattr(self.problem, "to_the_floor", False) and short_of_floor(step))
         )
 
     def _share(self, step: Step, share: float | None = None) -> float:
