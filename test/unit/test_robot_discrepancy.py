@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from test.unit.test_discrepancy import _step as discrepancy_step
+from test.unit.test_robot_zoo import robot_zoo
 from transparency_ros.analysis.discrepancy.discover import Discoverer
 from transparency_ros.analysis.discrepancy.robot import RobotProblem
 from transparency_ros.analysis.discrepancy.robot_effects import LATTICE_COUNTS, lattice_step
@@ -119,20 +122,13 @@ def test_the_share_on_the_final_model_can_differ_from_the_searchs(urdf: RobotMod
 def _near_floor_step(before: float, after: float) -> tuple[Step, Base]:
     """A step judged on an error of ``before`` noise floors that leaves ``after``, with an
     information criterion far better than its base's (every other test of the rule passed)."""
-    n = 1000
-    base = Base(np.full(n, before), before, n * math.log(before**2), 1.0)
-    step = Step(
-        added=[object()],
-        params=[np.array([0.01])],
-        err=np.full(n, after),
-        rmse=after,
-        aic=n * math.log(after**2) + 2,
-        gain=share_removed(before, after, 1.0),
+    step = replace(
+        discrepancy_step(object(), [0.01], after, 1.0),
         judged=(before, after, 1.0),
-        result=None,
-        meaningful=True,
+        gain=share_removed(before, after, 1.0),
     )
-    return step, base
+    n = step.err.size
+    return step, Base(np.full(n, before), before, n * math.log(before**2), 1.0)
 
 
 def test_below_the_stop_of_the_1dof_tools_an_effect_must_take_what_is_left_to_the_floor() -> None:
@@ -160,23 +156,11 @@ def test_a_delay_the_search_stopped_short_of_on_a_robot_written_elsewhere(tmp_pa
     its faults, 8 ms of sensor delay concealed): after the links' inertias the residual is
     1.43 noise floors, where the search used to stop; the delay takes it to 0.73 and is named
     at its size, and nothing outside what the robot's answers allow."""
-    zoo = _robot_zoo()
-    zoo.make(tmp_path, [1034])
-    truth = zoo.answers(zoo.draw(1034))
-    out = zoo.run_tool(tmp_path / "robot_1034", None, False)
-    scored = zoo.score(out["findings"], truth)
+    robot_zoo.make(tmp_path, [1034])
+    truth = robot_zoo.answers(robot_zoo.draw(1034))
+    out = robot_zoo.run_tool(tmp_path / "robot_1034", None, False)
+    scored = robot_zoo.score(out["findings"], truth)
     assert scored["right"] and scored["named"] == ["sensor_delay"], (scored, out["findings"])
-
-
-def _robot_zoo():  # type: ignore[no-untyped-def]
-    import sys  # noqa: PLC0415
-
-    benchmarks = Path(__file__).resolve().parents[2] / "benchmarks"
-    if str(benchmarks) not in sys.path:
-        sys.path.insert(0, str(benchmarks))
-    import robot_zoo  # noqa: PLC0415
-
-    return robot_zoo
 
 
 def test_motors_acting_late_are_named_as_the_command_delay(urdf: RobotModel) -> None:
