@@ -78,6 +78,7 @@ from transparency_ros.analysis.discrepancy.steps import (
     Base,
     Step,
     choose,
+    driven_to_bound,
     not_named,
     null_inside,
     same,
@@ -520,6 +521,7 @@ class Discoverer:
             meaningful=all(
                 a.meaningful(p) for a, p in zip(added, params[len(effects) :], strict=True)
             )
+            and not driven_to_bound(effects, params, base)
             and getattr(self.problem, "accepts", lambda _e, _p: True)([*effects, *added], params),
         )
 

@@ -90,7 +90,12 @@ class RobotEffect:
     def meaningful(self, p: FloatArray) -> bool:
         """A fit held at a bound of its range stands in for something it cannot be (the
         ranges of signed terms are symmetric: their sizes are checked)."""
-        return not pinned(np.abs(p), self.lower, self.upper)
+        return not self.pinned_by_refit(p)
+
+    def pinned_by_refit(self, p: FloatArray) -> bool:
+        """Held at a bound of its range (see meaningful): where a joint refit does this to
+        an effect named before, the step is not meaningful (``steps.driven_to_bound``)."""
+        return pinned(np.abs(p), self.lower, self.upper)
 
     def extra_parameters(self, p: FloatArray) -> dict[str, float]:
         return {}
