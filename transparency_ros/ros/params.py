@@ -248,9 +248,20 @@ def run_node(
     try:
         node = make_node()
         freeze_startup()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
+        # A signal while the executor is built shuts the context down under its constructor,
+        # which then raises half-built and prints an "Exception ignored" traceback from its
+        # __del__ (seen once under load: SIGTERM 1.5 s after the estimator's start). Signals
+        # are held while it is built and delivered after, when spin ends on them.
+        held = {signal.SIGINT, signal.SIGTERM}
+        signal.pthread_sigmask(signal.SIG_BLOCK, held)
+        try:
+            executor = SingleThreadedExecutor() if context_ok() else None
+            if executor is not None:
+                executor.add_node(node)
+        finally:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
+        if executor is not None:
+            executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except _rclpy.RCLError:
