@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.utilities import ok as context_ok
 from rclpy.utilities import try_shutdown
@@ -20,7 +20,11 @@ from transparency_ros.ros.actuator_driver.parameters import (
     PARAMETERS,
     exit_logger,
 )
-from transparency_ros.ros.params import freeze_startup, parse_node_cli
+from transparency_ros.ros.params import (
+    QuietMultiThreadedExecutor,
+    freeze_startup,
+    parse_node_cli,
+)
 
 
 def main(args: list[str] | None = None) -> int:
@@ -31,7 +35,7 @@ def main(args: list[str] | None = None) -> int:
         node = ActuatorDriverNode()
         freeze_startup()
         node.gc_pauses.durations.reset()  # from here on: the collections while running
-        executor = MultiThreadedExecutor(num_threads=2)
+        executor = QuietMultiThreadedExecutor(num_threads=2)
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
