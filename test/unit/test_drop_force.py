@@ -15,7 +15,12 @@ from transparency_ros.analysis.discrepancy.drop import (
     load_drop_nominal,
     load_drop_trial,
 )
-from transparency_ros.analysis.discrepancy.drop_force import FORCE_SIGNIFICANT, ForceView
+from transparency_ros.analysis.discrepancy.drop_force import (
+    BIN_S,
+    FORCE_SIGNIFICANT,
+    SETTLE_S,
+    ForceView,
+)
 from transparency_ros.analysis.discrepancy.findings import Report
 from transparency_ros.bag.reader import find_bags
 from transparency_ros.synth.drop_campaign import write_drop_campaign
@@ -156,3 +161,56 @@ def test_the_weight_the_load_cell_reads_is_named_though_the_encoder_disagrees(
     if shown:
         assert "shown by the load cell in the ride" in report.findings[0].evidence
         assert "% higher" in report.findings[0].evidence
+
+
+def _strike_again(view: ForceView, first: int = 4, flight: int = 4) -> None:
+    """In every trial's bins, the shuttle leaves the arm (the load cell reads nothing for
+    ``flight`` bins from bin ``first``) and strikes it again (a pulse of forty uncertainties
+    in the next bin): what a rebound whose timing the model misses by a millisecond leaves."""
+    for bins in (view.fit, view.held):
+        for measured, sigma in zip(bins.measured, bins.sigma, strict=True):
+            measured[first : first + flight] = 0.0
+            land = first + flight
+            measured[land] = measured[land] + 40.0 * sigma[land]
+
+
+def test_the_ride_is_compared_from_after_the_shuttles_last_flight(tmp_path: Path) -> None:
+    """Where the load cell reads the shuttle off the arm, the bins compared begin SETTLE_S
+    after the last such bin (the re-strike's pulse left out), in that trial only; before the
+    view is started on a model, every bin is compared."""
+    problem = _problem(tmp_path)
+    view = _self_simulated(problem)
+    weight = _named(problem, "payload_gravity")
+    held = view.held
+    counts = [m.size for m in held.measured]
+    assert held.size == sum(counts)
+    first, flight = 4, 4
+    for measured in held.measured[:1]:  # the first held-out trial only
+        measured[first : first + flight] = 0.0
+        measured[first + flight] += 40.0 * held.sigma[0][first + flight]
+    assert view.error([weight], [problem.initial(weight)], True).size == sum(counts)
+    view.start([weight], [problem.initial(weight)])
+    kept = held.kept_times()
+    last = held.times[0][first + flight - 1]
+    assert kept[0][0] >= last + BIN_S + SETTLE_S and kept[0].size < counts[0]
+    assert kept[0][0] < last + BIN_S + SETTLE_S + 1.5 * BIN_S
+    assert [k.size for k in kept[1:]] == counts[1:]
+    err = view.error([weight], [problem.initial(weight)], True)
+    assert err.size == held.size == sum(k.size for k in kept)
+    assert 0.7 < float(np.sqrt(np.mean(err**2))) < 1.3  # the re-strike's pulse is not in it
+    index, labels = view.segments()
+    assert index.size == err.size and labels[0][1] == pytest.approx(float(kept[0][0]))
+
+
+def test_a_cogging_is_named_though_the_shuttle_strikes_the_arm_again(tmp_path: Path) -> None:
+    """zoo_13285's case (a rebound beside the cogging): a load cell that shows the cogging
+    wave after every trial's shuttle left the arm and struck it again; the re-strikes' pulses
+    (forty uncertainties, in bins the settled ride keeps at about one) would drown the wave.
+    Cogging is named, its period within 2 and its size within 10 %."""
+    problem = _problem(tmp_path)
+    view = _self_simulated(problem, cogging_nm=0.03, cogging_periods=70.0, cogging_phase_rad=0.8)
+    _strike_again(view)
+    report, effects, *_ = _last_stage(problem, view)
+    assert [e.name for e in effects] == ["payload_gravity", "cogging"]
+    assert abs(report.findings[-1].parameters["periods_per_rev"] - 70) <= 2
+    assert report.findings[-1].parameters["amplitude_nm"] == pytest.approx(0.03, rel=0.1)

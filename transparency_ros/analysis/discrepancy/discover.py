@@ -262,8 +262,10 @@ class Discoverer:
         ]
         if view is None or not remaining:
             return effects, params, held_err
-        self.progress("searching the load cell")
         view.start(effects, params)
+        if not view.usable():  # (too little of the ride left where the shuttle settled)
+            return effects, params, held_err
+        self.progress("searching the load cell")
         # (the loop's own class: a subclass that logs its steps, benchmarks/share_calibration)
         stage = type(self)(view, min_improvement=self.min_improvement, progress=self.progress)
         found = len(effects)
