@@ -20,6 +20,7 @@ from transparency_ros.analysis.discrepancy.drop_force import (
     FORCE_SIGNIFICANT,
     SETTLE_S,
     ForceView,
+    _Bins,
 )
 from transparency_ros.analysis.discrepancy.findings import Report
 from transparency_ros.bag.reader import find_bags
@@ -163,15 +164,16 @@ def test_the_weight_the_load_cell_reads_is_named_though_the_encoder_disagrees(
         assert "% higher" in report.findings[0].evidence
 
 
-def _strike_again(view: ForceView, first: int = 4, flight: int = 4) -> None:
-    """In every trial's bins, the shuttle leaves the arm (the load cell reads nothing for
-    ``flight`` bins from bin ``first``) and strikes it again (a pulse of forty uncertainties
-    in the next bin): what a rebound whose timing the model misses by a millisecond leaves."""
-    for bins in (view.fit, view.held):
-        for measured, sigma in zip(bins.measured, bins.sigma, strict=True):
-            measured[first : first + flight] = 0.0
-            land = first + flight
-            measured[land] = measured[land] + 40.0 * sigma[land]
+def _strike_again(
+    bins: _Bins, trials: slice = slice(None), first: int = 4, flight: int = 4
+) -> None:
+    """In the ``trials`` of ``bins``, the shuttle leaves the arm (the load cell reads nothing
+    for ``flight`` bins from bin ``first``) and strikes it again (a pulse of forty
+    uncertainties in the next bin): what a rebound whose timing the model misses by a
+    millisecond leaves."""
+    for measured, sigma in zip(bins.measured[trials], bins.sigma[trials], strict=True):
+        measured[first : first + flight] = 0.0
+        measured[first + flight] += 40.0 * sigma[first + flight]
 
 
 def test_the_ride_is_compared_from_after_the_shuttles_last_flight(tmp_path: Path) -> None:
@@ -185,9 +187,7 @@ def test_the_ride_is_compared_from_after_the_shuttles_last_flight(tmp_path: Path
     counts = [m.size for m in held.measured]
     assert held.size == sum(counts)
     first, flight = 4, 4
-    for measured in held.measured[:1]:  # the first held-out trial only
-        measured[first : first + flight] = 0.0
-        measured[first + flight] += 40.0 * held.sigma[0][first + flight]
+    _strike_again(held, slice(0, 1), first, flight)  # the first held-out trial only
     assert view.error([weight], [problem.initial(weight)], True).size == sum(counts)
     view.start([weight], [problem.initial(weight)])
     kept = held.kept_times()
@@ -209,7 +209,8 @@ def test_a_cogging_is_named_though_the_shuttle_strikes_the_arm_again(tmp_path: P
     Cogging is named, its period within 2 and its size within 10 %."""
     problem = _problem(tmp_path)
     view = _self_simulated(problem, cogging_nm=0.03, cogging_periods=70.0, cogging_phase_rad=0.8)
-    _strike_again(view)
+    for bins in (view.fit, view.held):
+        _strike_again(bins)
     report, effects, *_ = _last_stage(problem, view)
     assert [e.name for e in effects] == ["payload_gravity", "cogging"]
     assert abs(report.findings[-1].parameters["periods_per_rev"] - 70) <= 2

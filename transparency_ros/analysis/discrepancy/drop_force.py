@@ -94,11 +94,8 @@ class _Bins:
         for i, t in enumerate(self.trials):
             light = FLIGHT_SHARE * t.mass_kg * GRAVITY
             flight = (self.measured[i] < light) | (model[i] < light)
-            keep = np.ones(flight.size, dtype=bool)
-            if flight.any():
-                last = float(self.times[i][flight].max())
-                keep = self.times[i] >= last + BIN_S + SETTLE_S
-            self.kept[i] = keep
+            last = self.times[i][flight].max() if flight.any() else -np.inf
+            self.kept[i] = self.times[i] >= last + BIN_S + SETTLE_S
 
     def error_many(self, physics: Sequence[DropPhysics]) -> list[FloatArray]:
         out = []
