@@ -430,9 +430,12 @@ class ShownRestitution(DropRestitution):
     def yields(self, own: FloatArray, rival: FloatArray, ratio: float) -> bool:
         """Whether the spring (fitted ``rival``) stands for the bounce rather than this
         rebound (fitted ``own``), its held-out RMSE ``ratio`` times this one's."""
-        return bool(
-            ratio <= self.RING_ALIKE and own[1] < self.SOFT_CONTACT and rival[1] < self.RINGS
-        )
+        return bool(ratio <= self.RING_ALIKE and self.imitates(own) and rival[1] < self.RINGS)
+
+    def imitates(self, own: FloatArray) -> bool:
+        """Whether this rebound (fitted ``own``) needed a contact as soft as a ring's: one
+        softer than ``SOFT_CONTACT``."""
+        return bool(own[1] < self.SOFT_CONTACT)
 
     def alike(self, own: FloatArray, ratio: float) -> str:
         """The rebound as an alternative to the spring it yielded to."""
