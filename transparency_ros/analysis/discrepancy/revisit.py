@@ -5,7 +5,7 @@ later may have been missing then, and what was named may have stood in for part 
 decisions are taken again on the model the search ended with:
 
 * :func:`rivals_again`: a shown effect against its rival (a rebound the load cell shows against
-  a ringing hub spring);
+  a ringing hub spring), and a rival named in its place with the shown effect on top of it;
 * :func:`still_needed`: each effect the search named, taken out and tried again by the rule
   that named it (``Discoverer._names``): one that no longer names is dropped;
 * :func:`variants_again`: a named effect against its variants that hold some of its
