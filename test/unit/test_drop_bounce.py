@@ -213,6 +213,24 @@ def test_a_shown_bounce_fitted_as_a_stiff_contacts_chatter_names_no_rebound() ->
     assert "holds e = 0" in shown.unnamed(np.array([0.3, 6.4]), True)
 
 
+def _final_loop(shown: ShownRestitution, searched: object, single: object) -> Discoverer:
+    """A loop (stubbed: ``single`` gives each fit) whose search ended having named
+    ``searched``, for rivals_again on its final model."""
+    loop = Discoverer.__new__(Discoverer)
+    loop.problem = SimpleNamespace(
+        candidates=lambda: [shown], error=lambda *_a: np.full(1000, 2e-3)
+    )
+    loop.min_improvement = 0.75
+    loop.progress = lambda _t: None
+    loop._refused = {}
+    loop._searched = {id(searched)}
+    loop._single = single  # type: ignore[method-assign]
+    loop._finding = lambda cand, step, *_a: SimpleNamespace(  # type: ignore[method-assign]
+        effect=cand.name, alternatives=step.alternatives, evidence=""
+    )
+    return loop
+
+
 def _decided_again(
     named: str, ratio: float, on_top: float
 ) -> tuple[list[str], list[str], list[np.ndarray]]:
@@ -234,17 +252,7 @@ def _decided_again(
         own = np.array([on_top, 6.3]) if spring in effects else fitted[id(cand)]
         return _given(cand, params, own, rmse)
 
-    loop = Discoverer.__new__(Discoverer)
-    loop.problem = SimpleNamespace(
-        candidates=lambda: [shown], error=lambda *_a: np.full(1000, 2e-3)
-    )
-    loop.progress = lambda _t: None
-    loop._refused = {}
-    loop._searched = {id(delay)}
-    loop._single = single  # type: ignore[method-assign]
-    loop._finding = lambda cand, step, *_a: SimpleNamespace(  # type: ignore[method-assign]
-        effect=cand.name, alternatives=step.alternatives, evidence=""
-    )
+    loop = _final_loop(shown, delay, single)
     first = spring if named == "structural_compliance" else shown
     report = SimpleNamespace(
         nominal={},
@@ -333,18 +341,7 @@ def _both_decided_again(
         own = np.array(on_final) if cand is shown else np.array([3.9, 0.03])
         return _given(cand, params, own, 1e-3)
 
-    loop = Discoverer.__new__(Discoverer)
-    loop.problem = SimpleNamespace(
-        candidates=lambda: [shown], error=lambda *_a: np.full(1000, 2e-3)
-    )
-    loop.min_improvement = 0.75
-    loop.progress = lambda _t: None
-    loop._refused = {}
-    loop._searched = {id(drift)}
-    loop._single = single  # type: ignore[method-assign]
-    loop._finding = lambda cand, step, *_a: SimpleNamespace(  # type: ignore[method-assign]
-        effect=cand.name, alternatives=step.alternatives, evidence=""
-    )
+    loop = _final_loop(shown, drift, single)
     named = [spring, shown, drift]
     report = SimpleNamespace(
         nominal={}, split={}, findings=[SimpleNamespace(effect=e.name) for e in named]

@@ -67,17 +67,9 @@ def rivals_again(
                 effects, params = _rival_given_up(loop, report, (effects, params), floor, held)
             continue
         i = held[0]
-        others, rest = effects[:i] + effects[i + 1 :], params[:i] + params[i + 1 :]
-        trial = Report(report.nominal, report.split)
-        trial.findings = report.findings[:i] + report.findings[i + 1 :]  # (as ``others``)
-        now, new_params, _ = loop._each_added(
-            trial,
-            (others, rest, loop.problem.error(others, rest, True)),
-            [cand],
-            floor,
-            loop._takes_declared,
-        )
-        taken = now[len(others) :]
+        model = (effects, params)
+        trial, now, new_params, _ = _added_again(loop, report, model, floor, held, cand=cand)
+        taken = now[len(effects) - 1 :]
         if taken and taken[0] is not effects[i]:
             loop.progress(
                 f"{effects[i].name} gives way to {' + '.join(t.name for t in taken)} on the"
@@ -109,9 +101,35 @@ def _rival_given_up(
     of it removes nothing, and the spring goes. Where the rebound still needs a soft contact
     (zoo_12409, a true 180 Hz spring: 10^5.80 N/m on the final model), both stay."""
     effects, params = model
-    i, k = held
-    rival, cand = effects[i], effects[k]
-    keep = [j for j in range(len(effects)) if j not in held]
+    rival, cand = effects[held[0]], effects[held[1]]
+    trial, now, new_params, err = _added_again(loop, report, model, floor, held, cand=cand)
+    kept = len(effects) - 2
+    taken = now[kept:]
+    if not taken or taken[0] is not cand or cand.imitates(new_params[kept]):
+        return effects, params
+    base = Base(err, rmse(err), aic(err, total(new_params)), floor, now, new_params)
+    if loop._names(loop._single(now, new_params, rival, base), base):
+        return effects, params
+    loop.progress(f"{rival.name} gives way to {cand.name} on the final model")
+    report.findings = trial.findings
+    return now, new_params
+
+
+def _added_again(
+    loop: Discoverer,
+    report: Report,
+    model: tuple[list[Any], list[FloatArray]],
+    floor: float,
+    out: list[int],
+    *,
+    cand: Any,
+) -> tuple[Report, list[Any], list[FloatArray], FloatArray]:
+    """The final ``model`` without its effects ``out``, ``cand`` added to it again by its own
+    rule (``_each_added``: a shown effect's rival read again): (a report holding the other
+    effects' findings and what was added, the effects, their parameters, the held-out
+    error)."""
+    effects, params = model
+    keep = [j for j in range(len(effects)) if j not in out]
     others, rest = [effects[j] for j in keep], [params[j] for j in keep]
     trial = Report(report.nominal, report.split)
     trial.findings = [report.findings[j] for j in keep]  # (as ``others``)
@@ -122,15 +140,7 @@ def _rival_given_up(
         floor,
         loop._takes_declared,
     )
-    taken = now[len(others) :]
-    if not taken or taken[0] is not cand or cand.imitates(new_params[len(others)]):
-        return effects, params
-    base = Base(err, rmse(err), aic(err, total(new_params)), floor, now, new_params)
-    if loop._names(loop._single(now, new_params, rival, base), base):
-        return effects, params
-    loop.progress(f"{rival.name} gives way to {cand.name} on the final model")
-    report.findings = trial.findings
-    return now, new_params
+    return trial, now, new_params, err
 
 
 def still_needed(
