@@ -75,6 +75,8 @@ class Step:
     alternatives: list[str] = field(default_factory=list)
     # the steps ``alternatives`` names (choose): their fitted values go into the finding
     alike: list[Any] = field(default_factory=list)
+    # the first of ``alike`` that only its ``yields_to`` put behind this one (choose)
+    behind: Any = None
     shown: bool = False  # stands for a declared effect the recording shows (see _each_added)
     elsewhere: str = ""  # what a second channel showed of it (a problem's shows_elsewhere)
     # of an added effect whose choice was made from the data by a scan (cogging's period):
@@ -283,15 +285,20 @@ def choose(
     ]  # fmt: skip
     if predicted and not any(c in predicted for c in alike):
         alike = [*alike, *predicted]
-    best = min(
-        alike,
-        key=lambda c: (
+
+    def order(c: Step) -> tuple[int, bool, int, float]:
+        return (
             sum(parameter_count(a, p) for a, p in c.new()),
             not all(expected(a, p) for a, p in c.new()),
             max(getattr(a, "yields_to", 0) for a in c.added),
             c.aic,
-        ),
-    )
+        )
+
+    best = min(alike, key=order)
     best.alike = [c for c in alike if c is not best]
+    best.behind = next(
+        (c for c in best.alike if order(c)[:2] == order(best)[:2] and order(c)[2] > order(best)[2]),
+        None,
+    )
     best.alternatives = ["+".join(a.name for a in c.added) for c in best.alike]
     return best
