@@ -128,14 +128,17 @@ def test_the_other_branch_is_reported_only_where_it_explains_better(
     branch_rmse: float, branch_params: int, kept: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     runs: list[int | None] = []
+    wave = SimpleNamespace(name="cogging", periods=40)  # (a scan's choice kept in the effect)
 
     def run_once(self: Discoverer) -> tuple[Any, Any, Any]:
         runs.append(self._take)
         if self._take is None:
             self._tie = (3, "restitution")
-            return SimpleNamespace(name="first", notes=[]), np.full(N, 1.2e-3), [np.ones(2)]
+            first = SimpleNamespace(name="first", notes=[], fitted=[(wave, np.ones(2))])
+            return first, np.full(N, 1.2e-3), [np.ones(2)]
+        wave.periods = 90  # the same candidate scanned again in the other search
         return (
-            SimpleNamespace(name="branch", notes=[]),
+            SimpleNamespace(name="branch", notes=[], fitted=[(wave, np.ones(2))]),
             np.full(N, branch_rmse),
             [np.ones(branch_params)],
         )
@@ -146,6 +149,7 @@ def test_the_other_branch_is_reported_only_where_it_explains_better(
     assert report.name == kept
     assert "taking restitution there instead" in report.notes[-1]
     assert ("not reported" in report.notes[-1]) == (kept == "first")
+    assert report.fitted[0][0].periods == (40 if kept == "first" else 90)
 
 
 def test_no_second_search_without_a_tie(monkeypatch: pytest.MonkeyPatch) -> None:

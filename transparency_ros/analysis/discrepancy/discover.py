@@ -37,6 +37,7 @@ other there, and the model that explains the held-out recordings better is repor
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -156,7 +157,11 @@ class Discoverer:
         named (zoo_13480: a hub spring taken for the shown rebound, alike, left 6 times the
         noise floor; the rebound taken, the backlash hidden beside it was named and the
         model left 1.7 times the floor)."""
-        other = Discoverer(
+        # (the same candidates are searched again, and a scan keeps what it chose in its
+        # effect, a cogging's period: the first model keeps its own copies)
+        report.fitted = [(copy.copy(e), p) for e, p in report.fitted]
+        # (the loop's own class: a subclass that logs its steps, benchmarks/share_calibration)
+        other = type(self)(
             self.problem, min_improvement=self.min_improvement, progress=self.progress
         )
         other.keep_improvement = self.keep_improvement
