@@ -1,7 +1,8 @@
 """A choice between fits alike made by an effect's yielding (a shown rebound to a hub spring in
 the declared stage, a Coulomb drift to an offset in the search) is searched again the other way,
 and the model that explains the held-out recordings better is reported (Discoverer.run,
-_other_way, _other_branch). Stub loops: which step a choice makes, and which report is kept."""
+branch.other_way, branch.other_branch). Stub loops: which step a choice makes, and which
+report is kept."""
 
 from __future__ import annotations
 

@@ -13,6 +13,7 @@ import pytest
 
 from transparency_ros.analysis.discrepancy.discover import Discoverer
 from transparency_ros.analysis.discrepancy.findings import Report
+from transparency_ros.analysis.discrepancy.pairs import with_declared
 from transparency_ros.analysis.discrepancy.revisit import still_needed
 from transparency_ros.analysis.discrepancy.steps import Base, Step
 
@@ -294,10 +295,10 @@ def test_a_declared_effect_is_paired_with_every_single_not_only_the_best_alone(
     ]  # (the drift last: the worst alone)
     monkeypatch.setattr(d, "refit", lambda _p, _e, params: (list(params), None))
     loop._step = lambda _e, _p, added, _r, _b: SimpleNamespace(added=added)  # type: ignore[method-assign,assignment]
-    steps = loop._with_declared([], singles, None)  # type: ignore[arg-type]
+    steps = with_declared(loop, [], singles, None)  # type: ignore[arg-type]
     assert [[a.name for a in s.added] for s in steps] == [[n, "payload_gravity"] for n in names]
     assert all(s.alone_rmse == [single.rmse] for s, single in zip(steps, singles, strict=True))
-    assert loop._with_declared([weight], singles, None) == []  # (nothing pending)
+    assert with_declared(loop, [weight], singles, None) == []  # (nothing pending)
 
 
 def test_a_declared_effect_is_refitted_with_a_candidate_from_that_ones_own_start_too(

@@ -37,11 +37,11 @@ other there, and the model that explains the held-out recordings better is repor
 
 from __future__ import annotations
 
-import copy
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from transparency_ros.analysis.discrepancy.branch import other_branch, other_way, taken
 from transparency_ros.analysis.discrepancy.effects import Effect
 from transparency_ros.analysis.discrepancy.findings import (
     Report,
@@ -64,7 +64,7 @@ from transparency_ros.analysis.discrepancy.pairs import (
     beyond_range,
     fitted_pairs,
     out_of_range,
-    refit_from_either,
+    with_declared,
 )
 from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
 from transparency_ros.analysis.discrepancy.revisit import (
@@ -136,48 +136,13 @@ class Discoverer:
         offset, ``yields_to`` in ``choose``), it is run again taking the other there (the
         first such choice), and the model that explains the held-out recordings better
         (beyond ``ALIKE``, and by the information criterion by 10) is reported
-        (``_other_branch``)."""
+        (``branch``)."""
         started = time.perf_counter()
         report, err, params = self._run_once()
         if self._tie is not None and self._take is None:
-            report = self._other_branch(report, err, params, self._tie)
+            report = other_branch(self, report, err, params, self._tie)
             report.seconds = time.perf_counter() - started  # (both searches)
         return report
-
-    def _other_branch(
-        self,
-        report: Report,
-        err: FloatArray,
-        params: list[FloatArray],
-        tie: tuple[int, str],
-    ) -> Report:
-        """``report`` (its model's held-out error ``err`` and parameters), or the report of
-        the search that takes the step ``tie`` names in its round, where that model explains
-        the held-out recordings better: a tie broken one way may lead where nothing more is
-        named (zoo_13480: a hub spring taken for the shown rebound, alike, left 6 times the
-        noise floor; the rebound taken, the backlash hidden beside it was named and the
-        model left 1.7 times the floor)."""
-        # (the same candidates are searched again, and a scan keeps what it chose in its
-        # effect, a cogging's period: the first model keeps its own copies)
-        report.fitted = [(copy.copy(e), p) for e, p in report.fitted]
-        # (the loop's own class: a subclass that logs its steps, benchmarks/share_calibration)
-        other = type(self)(
-            self.problem, min_improvement=self.min_improvement, progress=self.progress
-        )
-        other.keep_improvement = self.keep_improvement
-        other._take, names = tie
-        self.progress(f"searching again, taking {names} where the search took another alike")
-        branch, err_b, params_b = other._run_once()
-        before, after = rmse(err), rmse(err_b)
-        fewer = aic(err_b, total(params_b)) < aic(err, total(params)) - 10
-        better = after * ALIKE < before and fewer
-        kept, outcome = (branch, "reported") if better else (report, "not better: not reported")
-        kept.notes.append(
-            f"{names} explained the recordings alike with the effect named in its place; "
-            f"the search taking {names} there instead reaches a model of held-out RMSE "
-            f"{after:.4g} against {before:.4g}: {outcome}"
-        )
-        return kept
 
     def _run_once(self) -> tuple[Report, FloatArray, list[FloatArray]]:
         """The loop once: the report, its final model's held-out error and parameters."""
@@ -258,7 +223,7 @@ class Discoverer:
                 step = self._choose(
                     [
                         s
-                        for s in self._with_declared(effects, singles, base, remaining)
+                        for s in with_declared(self, effects, singles, base, remaining)
                         if self._names(s, base)
                     ]
                 )
@@ -283,8 +248,8 @@ class Discoverer:
                     (s for s in singles if s.meaningful), key=lambda s: s.gain, default=None
                 )
                 break
-            if step.behind is not None and self._other_way(step.behind):
-                step = _taken(step, step.behind)
+            if step.behind is not None and other_way(self, step.behind):
+                step = taken(step, step.behind)
             first_rmse = base.rmse
             for k, cand in enumerate(step.added):
                 # a pair: the first is reported with what it removes alone
@@ -303,15 +268,6 @@ class Discoverer:
                 effects, params, held_err = self._declared(report, effects, params, held_err, floor)
             remaining = not_named(remaining, effects)
         return effects, params, held_err, remaining, closest
-
-    def _other_way(self, behind: Step) -> bool:
-        """At a choice between fits alike made by an effect's yielding (``behind``: the step
-        of the effect put behind), whether this loop takes ``behind`` instead; the first
-        such choice is kept (run searches again from it)."""
-        count, self._ties = self._ties, self._ties + 1
-        if self._take is None and self._tie is None:
-            self._tie = (count, "+".join(a.name for a in behind.added))
-        return self._take == count
 
     def _on_load_cell(
         self,
@@ -441,7 +397,7 @@ class Discoverer:
             )
             step = self._single(effects, params, cand, base, after_search=after_search)
             rival = self._rival_instead(effects, params, cand, step, base)
-            if rival is not None and accept(rival, base) and not self._other_way(step):
+            if rival is not None and accept(rival, base) and not other_way(self, step):
                 queue.insert(0, cand)  # tried again on top of its rival
                 step, cand = rival, rival.added[0]
             elif not accept(step, base):
@@ -492,39 +448,6 @@ class Discoverer:
             for c in self.problem.candidates()
             if getattr(c, "declared", False) and all(c is not e for e in effects)
         ]
-
-    def _with_declared(
-        self,
-        effects: list[Any],
-        singles: list[Step],
-        base: Base,
-        candidates: Sequence[Any] | None = None,
-    ) -> list[Step]:
-        """Every single candidate with every declared effect not yet in the model (nothing
-        fitted for those): a declared effect is tried alone before the search and after each
-        effect found, but a large missing effect may hide it until both are in (a sensor's
-        delay and the shuttle's weight on the zoo). Every one, not the best few alone: the
-        one that hid it may be the worst alone (zoo_11662: a b_v drift ×1.4 made the error
-        1.7 times worse without the weight; with it, named at 1.397)."""
-        pending = self._pending_declared(effects)
-        out = []
-        origins = list(candidates) if candidates is not None else [None] * len(singles)
-        for orig, single in zip(origins, singles if pending else [], strict=False):
-            for cand in pending:
-                # the single was fitted without the declared effect: refitted with it (a
-                # sensor's delay fitted without the weight left twice the floor, zoo_1019),
-                # from that fit and, given the candidate it was made of, from that one's start
-                added, joint, result = refit_from_either(
-                    self.problem, effects, single, orig, cand, base=base
-                )
-                step = self._step(effects, joint, added, result, base)
-                if result is None:  # no better: the single's fit
-                    step.result, step.joint = single.result, single.joint
-                else:
-                    step.joint = True
-                step.alone_rmse, step.alone_aic = [single.rmse], [single.aic]
-                out.append(step)
-        return out
 
     def _single(
         self,
@@ -641,13 +564,6 @@ class Discoverer:
 
     def _choose(self, steps: list[Step]) -> Step | None:
         return choose(steps, getattr(self.problem, "expected", lambda _e, _p: False))
-
-
-def _taken(step: Step, other: Step) -> Step:
-    """``other``, alike with ``step`` and taken in its place: the others alike its own."""
-    other.alike = [c for c in [step, *step.alike] if c is not other]
-    other.alternatives = ["+".join(a.name for a in c.added) for c in other.alike]
-    return other
 
 
 def discover(
