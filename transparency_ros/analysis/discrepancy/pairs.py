@@ -159,12 +159,12 @@ def with_declared(
     candidates: Sequence[Any] | None = None,
 ) -> list[Step]:
     """Every single candidate (``Discoverer._search``: ``singles``, made of ``candidates``)
-    with every declared effect not yet in the model (nothing
-    fitted for those): a declared effect is tried alone before the search and after each
-    effect found, but a large missing effect may hide it until both are in (a sensor's
-    delay and the shuttle's weight on the zoo). Every one, not the best few alone: the
-    one that hid it may be the worst alone (zoo_11662: a b_v drift ×1.4 made the error
-    1.7 times worse without the weight; with it, named at 1.397)."""
+    with every declared effect not yet in the model (nothing fitted for those): a declared
+    effect is tried alone before the search and after each effect found, but a large
+    missing effect may hide it until both are in (a sensor's delay and the shuttle's weight
+    on the zoo). Every one, not the best few alone: the one that hid it may be the worst
+    alone (zoo_11662: a b_v drift ×1.4 made the error 1.7 times worse without the weight;
+    with it, named at 1.397)."""
     pending = loop._pending_declared(effects)
     out = []
     origins = list(candidates) if candidates is not None else [None] * len(singles)
