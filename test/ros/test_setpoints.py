@@ -209,7 +209,10 @@ def test_one_shot_commands_to_three_motors_are_followed_by_the_estimate(nodes: A
         one_shot(joints, target)
         time.sleep(1.0)
         for joint in joints:
-            assert settled_error(probe, joint) < 0.05, (target, joint)
+            # (what the estimator said lately, for a failure seen only under a loaded suite:
+            # no estimate of 'hip' among the last 50)
+            lately = [(list(m.name), list(m.position)) for m in probe.estimates[-3:]]
+            assert settled_error(probe, joint) < 0.05, (target, joint, len(probe.estimates), lately)
         assert len(probe.releases) == len(probe.contacts), (target, len(probe.contacts))
     common = set(probe.states) & set(probe.setpoints)
     assert len(common) > 0.95 * len(probe.states), (len(common), len(probe.states))

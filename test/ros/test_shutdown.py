@@ -84,9 +84,17 @@ def test_ctrl_c_of_the_behavior_while_sweeping(driver: Any) -> None:
 
 
 def test_sigterm_of_the_estimator_while_it_estimates(driver: Any) -> None:
+    node, _ = driver
+    estimates: list[JointState] = []
+    node.create_subscription(JointState, "/estimated_effort", estimates.append, 100)
     for attempt in range(TRIES):
+        estimates.clear()
         proc = start("contact_estimator")
-        time.sleep(1.5 + 0.1 * attempt)
+        # estimating, however long its start takes (a fixed 1.5 s was still its import on a
+        # loaded machine: the signal killed it before rclpy was up, status -15 and no output)
+        assert wait_for(lambda p=proc: len(estimates) > 20 or p.poll() is not None, 60.0)
+        assert proc.poll() is None, proc.communicate()[0]
+        time.sleep(0.1 * attempt)
         code, out = stopped(proc, signal.SIGTERM)
         assert code == 0 and "Traceback" not in out and "RCLError" not in out, (attempt, out)
 

@@ -10,13 +10,16 @@ Per trial: set ``sim_drop_height_m``, lift the shuttle (``~/sim/lift``), let the
 command theta_d = 0, reset the estimator, wait until it has estimated a sample stamped after
 that command (it is matched to the driver's streams and estimating: on a busy machine that can
 take a second after its process started, and a drop before it was detected late or not at all),
-start recording, command theta_d = 0 again (the trial's), drop (``~/sim/drop``), record for the
-free-fall time plus ``after_contact_s``, stop, write the bag (atomically; a bag directory that
-cannot take it is refused before the first trial).
+start recording, command theta_d = 0 again (the trial's), drop (``~/sim/drop``), record until
+/joint_states, the DAQ and /estimated_effort carry stamps the free-fall time plus
+``after_contact_s`` after the drop (not that much wall-clock time: on a busy machine they arrive
+late), stop, write the bag (atomically; a bag directory that cannot take it is refused before
+the first trial).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import subprocess
 import time
@@ -60,6 +63,10 @@ DAQ_TOPIC = "/actuator_driver/sim/daq"
 # how long a trial waits for the estimator to estimate a sample stamped after its command (its
 # process starting on a busy machine; the setpoint join holds a joint's first samples up to 5 s)
 ESTIMATOR_WAIT_S = 20.0
+# how far the rig's streams may lag behind the trial's end before the trial is refused (on a
+# loaded 2-core machine /joint_states reached this process 250 ms after their stamps, and a
+# trial recorded for its wall-clock time lost its contact)
+STREAM_LAG_S = 10.0
 
 
 class RigRunError(TransparencyError, RuntimeError):
@@ -137,6 +144,13 @@ def run_rig(
         low, high = drop.drop_height_range_m
         if not (0.0 < h <= 2.0):
             raise RigRunError(f"drop height {h} m out of range (the paper: {low}-{high} m)")
+    named = [trial_name(h, 1) for h in heights_m]
+    twice = sorted({n for n in named if named.count(n) > 1})
+    if twice:  # each height's bags are named after it: the second would meet the first's
+        raise RigRunError(
+            f"drop heights given twice ({', '.join(n.split('_')[0] for n in twice)}; bags are "
+            f"named to 0.1 mm): give each height once and repeats with --trials"
+        )
     bag_dir = out_dir / actuator
     taken = existing_trials(out_dir, actuator, heights_m, trials_per_height)
     if taken:
@@ -220,6 +234,8 @@ class _Station:
         self.newest_estimate_ns = -1  # the newest /estimated_effort stamp heard
         self._state: bytes | None = None  # the latest /joint_states sample, serialized
         self._states_heard = 0
+        self.newest_state_ns = -1  # the newest /joint_states stamp heard
+        self.newest_daq_ns = -1  # the newest DAQ sample's stamp heard while recording
         # the recorder's subscriptions serve these too: none made and destroyed per trial
         self.recorder = Recorder(
             node,
@@ -241,6 +257,8 @@ class _Station:
     def _on_state(self, data: bytes) -> None:
         self._state = data
         self._states_heard += 1
+        with contextlib.suppress(CdrError):  # not ours to judge: the recorder keeps it
+            self.newest_state_ns = max(self.newest_state_ns, header_stamp_ns(data))
 
     def position(self, timeout_s: float, what: str) -> float:
         """The arm's position now: the next /joint_states sample (RigRunError naming ``what``)."""
@@ -276,6 +294,15 @@ class _Station:
     def _on_daq(self, msg: Float64MultiArray) -> None:
         if self.recording:
             self.daq.append(msg)
+            data = msg.data
+            if len(data) >= 4:  # the block's last sample: stamp_sec, stamp_frac_s, ...
+                sec, frac = data[len(data) - 4], data[len(data) - 3]
+                self.newest_daq_ns = max(self.newest_daq_ns, round(sec) * 10**9 + round(frac * 1e9))
+
+    def _newest(self) -> dict[str, int]:
+        """The newest stamp [ns] heard on each stream a trial waits for (-1: none yet)."""
+        return {"/joint_states": self.newest_state_ns, "DAQ": self.newest_daq_ns,
+                "/estimated_effort": self.newest_estimate_ns}  # fmt: skip
 
     def command(self, theta_d: float) -> int:
         """Publish theta_d; return the command's stamp [ns]."""
@@ -289,18 +316,35 @@ class _Station:
         self, bag: BagWriter, theta_d: float, height_m: float, after_contact_s: float
     ) -> dict[str, int]:
         """One drop into ``bag``: the topics as they arrive, the DAQ blocks at the end (or at
-        the signal that stops it); returns the number of messages per topic."""
+        the signal that stops it); returns the number of messages per topic.
+
+        The trial ends when /joint_states, the DAQ and the estimator's /estimated_effort have
+        delivered samples stamped the free fall plus ``after_contact_s`` after the drop, not
+        after that much wall-clock time: on a busy machine the streams arrive late, and the
+        estimator's /contact later still (RigRunError beyond ``STREAM_LAG_S``)."""
         bag.add("/load_cell", "geometry_msgs/msg/WrenchStamped")
         bag.add("/shuttle/height", "geometry_msgs/msg/PointStamped")
         self.daq.clear()
+        self.newest_daq_ns = -1
         self.recording = True
         self.recorder.start(bag)
         try:
             self.command(theta_d)  # recorded: theta_d of this trial
             time.sleep(0.05)
             self.call(Trigger, "/actuator_driver/sim/drop", Trigger.Request())
-            time.sleep(math.sqrt(2.0 * height_m / GRAVITY) + after_contact_s)
-            time.sleep(0.05)  # the last DAQ block
+            # the rig let go before its answer came: stamps up to here cover the fall at least
+            trial_s = math.sqrt(2.0 * height_m / GRAVITY) + after_contact_s
+            end_ns = int(self.node.get_clock().now().nanoseconds) + round(trial_s * 1e9)
+            time.sleep(trial_s)
+            if not self._poll(lambda: min(self._newest().values()) >= end_ns, STREAM_LAG_S):
+                behind = ", ".join(
+                    f"{k} {'none' if v < 0 else f'{(end_ns - v) * 1e-9:.2f} s short'}"
+                    for k, v in self._newest().items()
+                )
+                raise RigRunError(
+                    f"the rig's streams did not reach the trial's end within {STREAM_LAG_S:g} s "
+                    f"of it ({behind}): the machine is too busy to record this trial"
+                )
         finally:
             # also when interrupted: what arrived up to the signal goes into the bag
             with deferred_interrupts():
