@@ -13,15 +13,13 @@ from __future__ import annotations
 import copy
 from typing import TYPE_CHECKING
 
-from transparency_ros.analysis.discrepancy.fitting import aic, rmse
+from transparency_ros.analysis.discrepancy.fitting import CRITERION, aic, rmse
 from transparency_ros.analysis.discrepancy.model import FloatArray
 from transparency_ros.analysis.discrepancy.steps import ALIKE, Step, total
 
 if TYPE_CHECKING:
     from transparency_ros.analysis.discrepancy.discover import Discoverer
     from transparency_ros.analysis.discrepancy.findings import Report
-
-CRITERION = 10.0  # the other search's model must improve the information criterion by this
 
 
 def other_way(loop: Discoverer, behind: Step) -> bool:

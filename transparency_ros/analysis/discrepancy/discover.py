@@ -52,6 +52,7 @@ from transparency_ros.analysis.discrepancy.findings import (
     widen,
 )
 from transparency_ros.analysis.discrepancy.fitting import (
+    CRITERION,
     aic,
     fit_candidate,
     interval,
@@ -338,7 +339,7 @@ class Discoverer:
             and (
                 step.shown
                 or all(getattr(a, "shown", False) for a in step.added)
-                or (step.rmse < base.rmse and step.aic < base.aic - 10)
+                or (step.rmse < base.rmse and step.aic < base.aic - CRITERION)
                 or getattr(self.problem, "shows_elsewhere", lambda _s, _b: False)(step, base)
                 or stood_in(step, base)
             )
@@ -554,8 +555,8 @@ class Discoverer:
             and not null_inside(step)
             and step.judged[0] - step.judged[1] >= 0.1 * step.judged[2]
             and step.gain >= self._share(step, share)
-            and step.aic < base.aic - 10
-            and all(step.aic < a - 10 for a in step.alone_aic)
+            and step.aic < base.aic - CRITERION
+            and all(step.aic < a - CRITERION for a in step.alone_aic)
             and not (getattr(self.problem, "to_the_floor", False) and short_of_floor(step))
         )
 

@@ -17,6 +17,9 @@ from transparency_ros.analysis.discrepancy.model import FloatArray
 from transparency_ros.analysis.discrepancy.problem import Problem
 
 GRID_POINTS = 25
+# by how much a model's information criterion (aic) must fall to count as better: a step that
+# names its effects, a pair against its members alone, a declared effect, the other search
+CRITERION = 10.0
 
 
 def rmse(err: FloatArray) -> float:
