@@ -81,6 +81,11 @@ class TrialBag:
     interrupted: bool = False  # closed by Ctrl-C / SIGTERM during the trial
 
 
+def _daq_stamp_ns(sec: float, frac: float) -> int:
+    """A DAQ sample's stamp [ns] from its whole seconds and fraction (``sim_rig.DAQ_COLUMNS``)."""
+    return round(sec) * 10**9 + round(frac * 1e9)
+
+
 def _daq_messages(blocks: list[Float64MultiArray]) -> list[tuple[str, int, Any]]:
     """DAQ blocks -> (topic, stamp [ns], rosbags message) for /load_cell and /shuttle/height."""
     types = message_types()
@@ -89,7 +94,7 @@ def _daq_messages(blocks: list[Float64MultiArray]) -> list[tuple[str, int, Any]]
         data = block.data
         for i in range(0, len(data) - 3, 4):
             sec, frac, force, height = data[i], data[i + 1], data[i + 2], data[i + 3]
-            ns = round(sec) * 10**9 + round(frac * 1e9)
+            ns = _daq_stamp_ns(sec, frac)
             stamp = time_msg(ns)
             vec = types["geometry_msgs/msg/Vector3"]
             wrench = types["geometry_msgs/msg/WrenchStamped"](
@@ -296,8 +301,8 @@ class _Station:
             self.daq.append(msg)
             data = msg.data
             if len(data) >= 4:  # the block's last sample: stamp_sec, stamp_frac_s, ...
-                sec, frac = data[len(data) - 4], data[len(data) - 3]
-                self.newest_daq_ns = max(self.newest_daq_ns, round(sec) * 10**9 + round(frac * 1e9))
+                stamp_ns = _daq_stamp_ns(data[len(data) - 4], data[len(data) - 3])
+                self.newest_daq_ns = max(self.newest_daq_ns, stamp_ns)
 
     def _newest(self) -> dict[str, int]:
         """The newest stamp [ns] heard on each stream a trial waits for (-1: none yet)."""
