@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -215,14 +217,11 @@ def test_a_height_given_twice_is_refused_before_any_node_starts(tmp_path: Path) 
     assert "[1/" not in done.stderr and not (tmp_path / "bags").exists()
 
 
-def test_a_trial_ends_when_the_streams_stamps_reach_its_end(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """A drop is recorded until /joint_states, the DAQ and /estimated_effort carry stamps past
-    its end, not for its wall-clock time: on a loaded machine the streams reached the recorder
-    250 ms after their stamps and a trial lost its contact. Streams that never get there are
-    refused."""
-    monkeypatch.setattr(rig_run, "STREAM_LAG_S", 1.0)
+@contextlib.contextmanager
+def _streams_late_by(lag_s: float) -> Iterator[tuple[_Station, list[int]]]:
+    """A station whose /joint_states, /estimated_effort and DAQ samples come every 5 ms
+    stamped ``lag_s`` before now (a stand-in for a loaded rig), and the clock readings of
+    each /actuator_driver/sim/drop it calls."""
     listener = Listener("rig_end_test")
     with listener as node:
         drops: list[int] = []
@@ -239,10 +238,10 @@ def test_a_trial_ends_when_the_streams_stamps_reach_its_end(
         daq = node.create_publisher(Float64MultiArray, rig_run.DAQ_TOPIC, 10)
         for pub in (states, estimates, daq):
             assert wait_for(lambda p=pub: p.get_subscription_count() > 0)
+        stop = threading.Event()
 
-        def stream(lag_s: float, until: threading.Event) -> None:
-            """Samples stamped ``lag_s`` before now, every 5 ms, until ``until`` is set."""
-            while not until.is_set():
+        def stream() -> None:
+            while not stop.is_set():
                 ns = node.get_clock().now().nanoseconds - round(lag_s * 1e9)
                 msg = JointState(name=["joint"], position=[0.0])
                 msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 10**9)
@@ -252,22 +251,40 @@ def test_a_trial_ends_when_the_streams_stamps_reach_its_end(
                 daq.publish(Float64MultiArray(data=[float(sec), frac * 1e-9, 0.0, 0.1]))
                 time.sleep(0.005)
 
-        for lag_s, trial in ((0.4, "late"), (3.0, "too_late")):
-            stop = threading.Event()
-            threading.Thread(target=stream, args=(lag_s, stop), daemon=True).start()
-            try:
-                with BagWriter(tmp_path / trial, {}) as bag:
-                    if trial == "too_late":
-                        short = r"\d\.\d\d s short"
-                        lag = rf"/joint_states {short}, DAQ {short}, /estimated_effort {short}"
-                        with pytest.raises(RigRunError, match=rf"within 1 s .*{lag}\): the mach"):
-                            station.record_drop(bag, 0.0, 0.05, 0.1)
-                        continue
-                    station.record_drop(bag, 0.0, 0.05, 0.1)
-            finally:
-                stop.set()
-            # a fall of 0.1 s plus 0.1 s after contact, from the drop: all of it is in the bag
-            with open_bag(tmp_path / trial) as recorded:
-                last = int(joint_series(recorded, "/joint_states").stamp_ns.max())
-                assert recorded.topics["/load_cell"].count > 0
-            assert last >= drops[-1] + 200_000_000
+        threading.Thread(target=stream, daemon=True).start()
+        try:
+            yield station, drops
+        finally:
+            stop.set()
+
+
+def test_a_trial_ends_when_the_streams_stamps_reach_its_end(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A drop is recorded until /joint_states, the DAQ and /estimated_effort carry stamps past
+    its end, not for its wall-clock time: on a loaded machine the streams reached the recorder
+    250 ms after their stamps and a trial lost its contact."""
+    monkeypatch.setattr(rig_run, "STREAM_LAG_S", 1.0)
+    with _streams_late_by(0.4) as (station, drops), BagWriter(tmp_path / "late", {}) as bag:
+        station.record_drop(bag, 0.0, 0.05, 0.1)
+    # a fall of 0.1 s plus 0.1 s after contact, from the drop: all of it is in the bag
+    with open_bag(tmp_path / "late") as recorded:
+        last = int(joint_series(recorded, "/joint_states").stamp_ns.max())
+        assert recorded.topics["/load_cell"].count > 0
+    assert last >= drops[-1] + 200_000_000
+
+
+def test_streams_that_never_reach_a_trials_end_are_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Streams further behind their stamps than STREAM_LAG_S stop the run with one line
+    naming each stream's lag."""
+    monkeypatch.setattr(rig_run, "STREAM_LAG_S", 1.0)
+    short = r"\d\.\d\d s short"
+    lag = rf"/joint_states {short}, DAQ {short}, /estimated_effort {short}"
+    with (
+        _streams_late_by(3.0) as (station, _drops),
+        BagWriter(tmp_path / "too_late", {}) as bag,
+        pytest.raises(RigRunError, match=rf"within 1 s .*{lag}\): the mach"),
+    ):
+        station.record_drop(bag, 0.0, 0.05, 0.1)
