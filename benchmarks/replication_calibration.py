@@ -171,11 +171,11 @@ def table(rows: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
     waiver = {str(t): counts(band, lambda v, t=t: v <= t) for t in THRESHOLDS}
     refusal = {str(t): counts(first, lambda v, t=t: v > t) for t in THRESHOLDS}
     in_band, all_named = counts(band, lambda _v: True), counts(first, lambda _v: True)
-    names = sorted(r["campaign"] for r in rows)
+    sets = sorted({r["campaign"][:-2] + "xx" for r in rows})  # (the seeds' hundreds)
     lines = [
         "# A replication test for any single effect (drop tests), measured on the zoo",
         "",
-        f"Campaigns: {len(rows)} ({names[0]}-{names[-1]}), the tool unchanged. First-order:"
+        f"Campaigns: {len(rows)} ({', '.join(sets)}), the tool unchanged. First-order:"
         " the logged rounds. Kinds by the campaign's truth: required / allowed / neither.",
         "",
         "*As a waiver of the share*: effects not named whose steps removed "
