@@ -22,9 +22,10 @@ trial's model that refit makes, over the effect's contribution in that trial (at
 ``CAP``), weighted by the contribution's square. 0: every trial wants the fitted values.
 
 ``log`` runs the tool on drop_zoo campaigns (made beforehand with ``drop_zoo.py DIR --seeds``)
-unchanged and records, with the campaign's truth, every single step that passes every part
-of the rule but perhaps the share (meaningful, interval off its null, a tenth of the floor,
-the criterion by 10) and removes at least ``LOGGED_SHARE``, with its spread.
+unchanged and records, with the campaign's truth, every single step that the loop's own rule
+(``Discoverer._names``) would name with no share asked (meaningful, interval off its null, a
+tenth of the floor, the criterion by 10) and that removes at least ``LOGGED_SHARE``, with its
+spread.
 
 ``table`` reads such logs. First-order (the logged rounds, not a re-run):
 - *as a waiver*: per campaign and effect not named, its least spread among its steps in the
@@ -32,9 +33,10 @@ the criterion by 10) and removes at least ``LOGGED_SHARE``, with its spread.
   allows or neither, with a spread at most T, for each T of ``THRESHOLDS``;
 - *as a refusal*: per effect named, its first naming step's spread; how many of those above
   T the truth requires, allows or neither.
-Measured on development seeds 13200-13272 it separates neither way (docs/discrepancy.md,
-thirty-sixth and thirty-seventh sessions): smooth stand-ins (drifts, offsets, delays) fit
-each trial alike, as the model's own error in the contact and friction laws is every trial's.
+Measured on development seeds 13200-13349 and fresh seeds 13800-13899 it separates neither
+way (docs/discrepancy.md, thirty-sixth and thirty-seventh sessions): smooth stand-ins
+(drifts, offsets, delays) fit each trial alike, as the model's own error in the contact and
+friction laws is every trial's.
 """
 
 from __future__ import annotations
@@ -106,22 +108,9 @@ def log_campaign(campaign: Path) -> dict[str, Any]:
     their spread."""
     from share_calibration import logged_run  # noqa: PLC0415
 
-    from transparency_ros.analysis.discrepancy.fitting import CRITERION  # noqa: PLC0415
-    from transparency_ros.analysis.discrepancy.steps import (  # noqa: PLC0415
-        null_inside,
-        share_needed,
-    )
-
     def record(loop: Any, s: Any, base: Any, _cand: Any, _kw: Any) -> dict[str, Any] | None:
-        before, after, floor = s.judged
-        if not (
-            len(s.added) == 1
-            and s.meaningful
-            and not null_inside(s)
-            and before - after >= 0.1 * floor
-            and s.aic < base.aic - CRITERION
-            and s.gain >= LOGGED_SHARE
-        ):
+        # the loop's own rule with no share asked (Discoverer._names): what the share decides
+        if not (len(s.added) == 1 and s.gain >= LOGGED_SHARE and loop._names(s, base, 0.0)):
             return None
         effect = s.added[0]  # (a drift reduced to the terms that drifted: that one)
         spread = spread_of(loop.problem, base.effects, s.params, effect)
@@ -130,7 +119,7 @@ def log_campaign(campaign: Path) -> dict[str, Any]:
             "before": [e.name for e in base.effects],
             "cand": effect.name,
             "gain": float(s.gain),
-            "needed": float(share_needed(s, loop.min_improvement)),
+            "needed": float(loop._share(s)),
             "names": bool(loop._names(s, base)),
             "params": [float(v) for v in s.params[-1]],
             "spread": None if math.isnan(spread) else spread,  # (strict JSON)
