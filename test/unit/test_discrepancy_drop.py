@@ -22,6 +22,7 @@ from transparency_ros.analysis.discrepancy.drop_clip import drive_clip
 from transparency_ros.analysis.discrepancy.drop_effects import (
     DeclaredWeight,
     DropBacklash,
+    ImpactSpeedLoss,
     MeasuredSaturation,
 )
 from transparency_ros.analysis.discrepancy.drop_library import drop_library
@@ -85,6 +86,25 @@ def test_rail_friction_is_found_where_it_acts_before_contact(tmp_path: Path) -> 
     assert finding.where["phase"] == "before_contact"
     assert finding.parameters["rail_friction_n"] == pytest.approx(truth["rail_friction_n"], rel=0.1)
     assert 0 < finding.parameters["speed_loss_fraction"] < 0.2
+
+
+def test_rail_friction_the_falls_do_not_show_is_refused(tmp_path: Path) -> None:
+    """The falls measure the rail's braking directly: a braking force they contradict is not
+    accepted whatever it explains in the impact, the one they show is."""
+    braked = _problem(
+        write_drop_campaign(tmp_path / "r", 7, hidden=["impact_speed_loss"], actuator="EC60")
+    )
+    free = _problem(write_drop_campaign(tmp_path / "f", 1, hidden=[], actuator="EC60"))
+    rail = ImpactSpeedLoss(free.held_trials[0].mass_kg)
+    labels = json.loads((tmp_path / "r" / "labels.json").read_text())["hidden"]
+    true_n = labels["impact_speed_loss"]["rail_friction_n"]
+    assert braked.accepts([rail], [np.array([true_n])])
+    assert free.accepts([rail], [np.array([0.0])])  # no braking in the model: nothing to judge
+    assert not free.accepts([rail], [np.array([true_n])])
+    # the same through the load cell's view, which holds the falls' judgement too
+    view = free.force_view()
+    if view is not None:
+        assert not view.accepts([rail], [np.array([true_n])])
 
 
 def test_gearbox_backlash_is_found_with_its_width(tmp_path: Path) -> None:

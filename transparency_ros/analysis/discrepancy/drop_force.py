@@ -213,6 +213,10 @@ class ForceView:
         return None
 
     def accepts(self, effects: Sequence[DropEffect], params: Sequence[FloatArray]) -> bool:
+        """Not at the cost of the kinematics (``KINEMATICS_KEPT``), nor against the falls
+        (DropProblem.accepts: rail friction the falls say is not there)."""
+        if not self.base.accepts(effects, params):
+            return False
         if self._kinematic is None:
             return True
         err = self.base.error(effects, params, True)
