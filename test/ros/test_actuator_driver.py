@@ -515,7 +515,7 @@ def test_one_silent_motor_among_several(driver_factory: Any, policy: str) -> Non
         assert all(core.mode is DriverMode.FAULT for core in node.cores)
         # disabled, still published; the silent knee in no message (the last 20, as below)
         assert wait_for(lambda: not any("knee" in m.name for m in probe.states[-20:]), 2.0)
-        assert list(probe.states[-1].name) == ["hip", "ankle"]
+        assert wait_for(lambda: list(probe.states[-1].name) == ["hip", "ankle"], 2.0)
     else:
         # the knee disabled, the others driving (the simulated motors take the disable from a
         # thread of this process: 0.2 s of sleep was too little with two test suites sharing
@@ -524,7 +524,9 @@ def test_one_silent_motor_among_several(driver_factory: Any, policy: str) -> Non
         # (the last 20 messages without it: a loaded machine delivers them in bursts, and the
         # latest without the knee came with some before it that had it)
         assert wait_for(lambda: not any("knee" in m.name for m in probe.states[-20:]), 2.0)
-        assert list(probe.states[-1].name) == ["hip", "ankle"]
+        # (a motor whose reply misses a cycle is left out of that one message, by design: under
+        # load the latest had only the hip once, the ankle's reply late, CI of 7283549)
+        assert wait_for(lambda: list(probe.states[-1].name) == ["hip", "ankle"], 2.0)
         # re-enabling needs every motor to answer; with the knee still silent it fails safe
         response = probe.call(SetBool, "/actuator_driver/enable", SetBool.Request(data=True))
         assert not response.success and "knee" in response.message
