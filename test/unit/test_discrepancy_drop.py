@@ -103,8 +103,8 @@ def test_rail_friction_the_falls_do_not_show_is_refused(tmp_path: Path) -> None:
     assert not free.accepts([rail], [np.array([true_n])])
     # the same through the load cell's view, which holds the falls' judgement too
     view = free.force_view()
-    if view is not None:
-        assert not view.accepts([rail], [np.array([true_n])])
+    assert view is not None
+    assert not view.accepts([rail], [np.array([true_n])])
 
 
 def test_gearbox_backlash_is_found_with_its_width(tmp_path: Path) -> None:

@@ -519,8 +519,14 @@ class Discoverer:
                 a.meaningful(p) for a, p in zip(added, params[len(effects) :], strict=True)
             )
             and not driven_to_bound(effects, params, base)
-            and getattr(self.problem, "accepts", lambda _e, _p: True)([*effects, *added], params),
+            and self.accepts([*effects, *added], params),
         )
+
+    def accepts(self, effects: Sequence[Any], params: Sequence[FloatArray]) -> bool:
+        """Whether the problem allows this model whatever it explains (its optional
+        ``accepts``: a drop test's rail friction the falls contradict); True without one."""
+        accepts = getattr(self.problem, "accepts", None)
+        return accepts is None or bool(accepts(effects, params))
 
     def _judged(
         self, added: list[Any], base: Base, err: FloatArray, after_search: bool = False

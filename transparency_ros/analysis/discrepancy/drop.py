@@ -278,8 +278,15 @@ class DropProblem:
         )
         if not np.any(rail != 0.0):
             return True
-        braked, free = (np.concatenate(self.held._falls(r)) for r in (rail, np.zeros_like(rail)))
-        return not free.size or aic(braked, 1) - aic(free, 1) <= CRITERION
+        free = self._free_falls_aic
+        braked = np.concatenate(self.held._falls(rail))
+        return free is None or aic(braked, 1) - free <= CRITERION
+
+    @cached_property
+    def _free_falls_aic(self) -> float | None:
+        """The held-out falls' criterion in free fall (``accepts``), or None without falls."""
+        free = np.concatenate(self.held._falls(np.zeros(len(self.held_trials))))
+        return aic(free, 1) if free.size else None
 
     def expected(self, effect: DropEffect, p: FloatArray) -> bool:
         """Whether the recording itself predicts this fitted effect, within 30 %: a constant

@@ -77,7 +77,6 @@ def fitted_pairs(
     # falls contradict, DropProblem.accepts) is left out before the finalists are chosen:
     # on zoo_13822 (an offset and a backlash hidden) two backlash-and-rail pairs the falls
     # refuse took two of the three places, and the true pair, fourth, was never refitted
-    accepts = getattr(loop.problem, "accepts", lambda _e, _p: True)
     fitted: list[tuple[float, Step, Step, list[FloatArray], Any]] = []
     for i, first in enumerate(ranked):
         for second in ranked[i + 1 :]:
@@ -90,7 +89,7 @@ def fitted_pairs(
             x0 = [*params, *(x for _, x in first.new()), *(x for _, x in second.new())]
             # the pair's own parameters first (the effects found before held)
             own, result = refit(loop.problem, [*effects, *added], x0, start=n)
-            if not accepts([*effects, *added], own):
+            if not loop.accepts([*effects, *added], own):
                 continue  # (refused whatever it fits: it takes no finalist's place)
             cost = fit_cost(loop.problem, [*effects, *added], own, result)
             fitted.append((cost, first, second, own, result))
