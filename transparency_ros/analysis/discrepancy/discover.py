@@ -67,7 +67,7 @@ from transparency_ros.analysis.discrepancy.pairs import (
     out_of_range,
     with_declared,
 )
-from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem
+from transparency_ros.analysis.discrepancy.problem import SIGNIFICANT, Problem, hook
 from transparency_ros.analysis.discrepancy.revisit import (
     friction_given_away,
     rivals_again,
@@ -149,7 +149,7 @@ class Discoverer:
         """The loop once: the report, its final model's held-out error and parameters."""
         started = time.perf_counter()
         problem = self.problem
-        report = Report(problem.nominal, problem.split, notes=list(getattr(problem, "notes", [])))
+        report = Report(problem.nominal, problem.split, notes=list(hook(problem, "notes")))
         effects: list[Any] = []
         params: list[FloatArray] = []
         held_err = problem.error(effects, params, True)
@@ -184,7 +184,7 @@ class Discoverer:
             if getattr(c, "shown", False) and hasattr(c, "unnamed") and id(c) in self._refused
         ]
         report.fitted = list(zip(effects, params, strict=True))
-        widen(report, getattr(problem, "model_error_share", 0.0))
+        widen(report, hook(problem, "model_error_share"))
         report.final_heldout_rmse = rmse(held_err)
         report.unexplained = leftover(
             problem,
@@ -209,10 +209,10 @@ class Discoverer:
         candidates not named, the closest refused step)."""
         problem = self.problem
         floor = problem.noise_floor()
-        declared = getattr(problem, "declared_stage", True)
+        declared = hook(problem, "declared_stage")
         closest: Step | None = None
-        left = getattr(problem, "structure_left", lambda e: rmse(e) > SIGNIFICANT * floor)
-        pairs = getattr(problem, "pairs", True)
+        left = hook(problem, "structure_left")
+        pairs = hook(problem, "pairs")
         while remaining and left(held_err):
             base = Base(
                 held_err, rmse(held_err), aic(held_err, total(params)), floor, effects, params
@@ -281,7 +281,7 @@ class Discoverer:
         (``force_view`` of the problem: a drop test's load cell while the shuttle rides the
         arm, drop_force), the effects found held: a torque of a few hundredths of a newton
         metre the encoder shows within a count the load cell shows at tens of its noise."""
-        view = getattr(self.problem, "force_view", lambda: None)()
+        view = hook(self.problem, "force_view")()
         remaining = [
             c
             for c in not_named(list(self.problem.candidates()), effects)
@@ -340,7 +340,7 @@ class Discoverer:
                 step.shown
                 or all(getattr(a, "shown", False) for a in step.added)
                 or (step.rmse < base.rmse and step.aic < base.aic - CRITERION)
-                or getattr(self.problem, "shows_elsewhere", lambda _s, _b: False)(step, base)
+                or hook(self.problem, "shows_elsewhere")(step, base)
                 or stood_in(step, base)
             )
         )
@@ -468,7 +468,7 @@ class Discoverer:
         x, result = fit_candidate(self.problem, effects, params, cand, start)
         joint, together = (
             refit(self.problem, [*effects, cand], [*params, x])
-            if getattr(self.problem, "joint_refit", True)
+            if hook(self.problem, "joint_refit")
             else ([*params, x], None)
         )
         if together is None:
@@ -525,8 +525,7 @@ class Discoverer:
     def accepts(self, effects: Sequence[Any], params: Sequence[FloatArray]) -> bool:
         """Whether the problem allows this model whatever it explains (its optional
         ``accepts``: a drop test's rail friction the falls contradict); True without one."""
-        accepts = getattr(self.problem, "accepts", None)
-        return accepts is None or bool(accepts(effects, params))
+        return bool(hook(self.problem, "accepts")(effects, params))
 
     def _judged(
         self, added: list[Any], base: Base, err: FloatArray, after_search: bool = False
@@ -535,11 +534,11 @@ class Discoverer:
         it; for effects of one sensor's readings (``sensor_scope`` of the problem, which knows
         the effects found), or where only one sensor's error is left above its floor
         (``leftover_scope``), that sensor's error and its own floor."""
-        scoped = getattr(self.problem, "sensor_scope", lambda *_a: None)
+        scoped = hook(self.problem, "sensor_scope")
         scope = scoped(added, after_search, base.effects)
         if scope is None and base.rmse <= SIGNIFICANT * base.floor:
             # the pooled error is near its floor: what is left is one sensor's, judged there
-            scope = getattr(self.problem, "leftover_scope", lambda _e: None)(base.err)
+            scope = hook(self.problem, "leftover_scope")(base.err)
         if scope is None:
             return base.rmse, rmse(err), base.floor
         mask, floor = scope
@@ -563,14 +562,14 @@ class Discoverer:
             and step.gain >= self._share(step, share)
             and step.aic < base.aic - CRITERION
             and all(step.aic < a - CRITERION for a in step.alone_aic)
-            and not (getattr(self.problem, "to_the_floor", False) and short_of_floor(step))
+            and not (hook(self.problem, "to_the_floor") and short_of_floor(step))
         )
 
     def _share(self, step: Step, share: float | None = None) -> float:
         return share_needed(step, self.min_improvement if share is None else share)
 
     def _choose(self, steps: list[Step]) -> Step | None:
-        return choose(steps, getattr(self.problem, "expected", lambda _e, _p: False))
+        return choose(steps, hook(self.problem, "expected"))
 
 
 def discover(

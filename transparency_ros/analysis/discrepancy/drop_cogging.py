@@ -14,6 +14,7 @@ import numpy as np
 from transparency_ros.analysis.discrepancy.drop_effects import DropEffect
 from transparency_ros.analysis.discrepancy.drop_physics import DropPhysics
 from transparency_ros.analysis.discrepancy.model import FloatArray
+from transparency_ros.analysis.discrepancy.problem import hook
 
 # cogging periods per output revolution tried: from where the positions the arm visited span
 # one whole period (less of a wave is a constant torque and a spring there: 2 periods per
@@ -146,7 +147,7 @@ class DropCogging(DropEffect):
         periods a wave stands in for a smooth torque that every trial shows alike (0.15-0.3
         at 1.7-1.9 periods). NaN where the problem does not say which trial each element is
         of (the load cell's bins). See benchmarks/prominence_calibration.py."""
-        index = getattr(problem, "trial_index", None)
+        index = hook(problem, "trial_index")
         amplitude, phase = float(params[-1][0]), float(params[-1][1])
         if index is None or amplitude <= 0:
             return math.nan

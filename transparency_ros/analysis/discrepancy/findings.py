@@ -14,7 +14,7 @@ import numpy as np
 
 from transparency_ros.analysis.discrepancy.fitting import interval
 from transparency_ros.analysis.discrepancy.model import FloatArray
-from transparency_ros.analysis.discrepancy.problem import Problem
+from transparency_ros.analysis.discrepancy.problem import Problem, hook
 
 STATE_EXPLAINED = 0.3  # below: the leftover torque is not a function of the state
 LEFTOVER = 3.0  # a phase whose residual is above 3x the noise floor is left unexplained
@@ -110,7 +110,7 @@ def alike_fits(problem: Any, step: Any) -> list[dict[str, Any]]:
     step where the problem knows why the recordings cannot (``told_apart`` of the problem,
     e.g. an arm that turned one way in every trial: a Coulomb torque and an offset then act
     alike). A user shown two explanations needs both sizes to judge which is plausible."""
-    told = getattr(problem, "told_apart", lambda _a, _b: "")
+    told = hook(problem, "told_apart")
     out = []
     for other in getattr(step, "alike", []):
         values: dict[str, float] = {}
@@ -159,8 +159,8 @@ def finding(
     else:
         ci = interval(step.result, x)
     together = [a.name for a in step.added if a is not cand]
-    judged_on = getattr(problem, "channel", "simulation")
-    unit = getattr(problem, "unit", "rad")
+    judged_on = hook(problem, "channel")
+    unit = hook(problem, "unit")
     read_off = hasattr(cand, "describe")
     judged_before, judged_after, judged_floor = step.judged
     judged = (
@@ -283,7 +283,7 @@ def sensor_leftover(problem: Problem, err: FloatArray) -> tuple[str, float, floa
     -0.032 N m hidden, nothing named) the encoder's error was 8x its floor of 0.055 mrad, the
     pooled error at the floor the heights' 1.4 mrad of noise set: the report said nothing was
     left."""
-    scope = getattr(problem, "leftover_scope", lambda _e: None)(err)
+    scope = hook(problem, "leftover_scope")(err)
     if scope is None:
         return None
     mask, floor = scope
@@ -294,7 +294,7 @@ def sensor_leftover(problem: Problem, err: FloatArray) -> tuple[str, float, floa
         return None
     weight = {name: float(np.sum(err[mask & m] ** 2)) for name, m in problem.phases().items()}
     phase = max(weight, key=weight.__getitem__)
-    return str(getattr(problem, "scoped_sensor", "sensor")), rms, floor, phase
+    return str(hook(problem, "scoped_sensor")), rms, floor, phase
 
 
 def leftover(
@@ -335,7 +335,7 @@ def leftover(
     for entry, looks in found:
         if peak is None:
             peak = problem.residual_peak_hz(effects, params)
-            explained = getattr(problem, "state_explained", lambda *_: None)(effects, params)
+            explained = hook(problem, "state_explained")(effects, params)
         # (the peak is the pooled residual's: not said of one sensor's part of it)
         pooled = "sensor" not in entry["where"]
         entry["dominant_frequency_hz"] = peak if pooled else None

@@ -4,6 +4,7 @@ behind the noise floor and the residual's dominant frequency."""
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -54,6 +55,99 @@ class Problem(Protocol):
     def trace(
         self, effects: Sequence[Any], params: Sequence[FloatArray], segment: int
     ) -> Trace: ...
+
+
+class Hooks:
+    """What a :class:`Problem` may say besides what it must, with what the loop assumes where
+    it says nothing: the values and methods here, bound to the problem. A kind of recording
+    defines only the ones it changes (drop tests, their load cell's view, robots); the loop
+    reads each through :func:`hook`, which refuses a name not declared here."""
+
+    # notes on the data, said in every report
+    notes: Sequence[str] = ()
+    # the share of its value every named parameter's 95 % interval is widened by (the model's
+    # own error, measured where the truth is known)
+    model_error_share = 0.0
+    # what the compared error is of, and its unit, as the findings say it
+    channel = "simulation"
+    unit = "rad"
+    # the sensor whose error :meth:`leftover_scope` singles out, as the report names it
+    scoped_sensor = "sensor"
+    # effects the recording declares (nothing fitted) are named before any search
+    declared_stage = True
+    # two candidates are fitted together where none names alone
+    pairs = True
+    # a named effect's parameters are fitted again with those found before it
+    joint_refit = True
+    # the search goes on below SIGNIFICANT times the floor, and a step judged there must
+    # take the error down to the floor
+    to_the_floor = False
+    # a method (held) -> the trial of every element of ``error``; None: not said
+    trial_index = None
+
+    def structure_left(self: Any, err: FloatArray) -> bool:
+        """Whether the held-out error ``err`` has structure left to search for."""
+        floor: float = self.noise_floor()
+        return float(np.sqrt(np.mean(err**2))) > SIGNIFICANT * floor
+
+    def force_view(self: Any) -> Any:
+        """A second view of the recordings searched after the first (a drop test's load
+        cell), or None."""
+        return None
+
+    def shows_elsewhere(self: Any, step: Any, base: Any) -> bool:
+        """Whether a step that removes too little of the pooled error shows on another
+        sensor enough to be judged there."""
+        return False
+
+    def accepts(self: Any, effects: Sequence[Any], params: Sequence[FloatArray]) -> bool:
+        """Whether the problem allows this model whatever it explains."""
+        return True
+
+    def sensor_scope(
+        self: Any, effects: Sequence[Any], after_search: bool = False, modelled: Sequence[Any] = ()
+    ) -> tuple[npt.NDArray[np.bool_], float] | None:
+        """(mask, floor) of the one sensor's error the effects added to the model
+        (``modelled``: those found before) are judged on, or None: all of it."""
+        return None
+
+    def leftover_scope(self: Any, err: FloatArray) -> tuple[npt.NDArray[np.bool_], float] | None:
+        """(mask, floor) of the one sensor whose error is left above its floor in ``err``
+        where the pooled is near its own, or None."""
+        return None
+
+    def expected(self: Any, effect: Any, params: FloatArray) -> bool:
+        """Whether a step's effect is what the recording leads one to expect (chosen first
+        among steps alike)."""
+        return False
+
+    def told_apart(self: Any, named: Sequence[Any], other: Sequence[Any]) -> str:
+        """Why effects alike in the held-out error cannot be told apart, where the recordings
+        say ("": not said)."""
+        return ""
+
+    def state_explained(
+        self: Any, effects: Sequence[Any], params: Sequence[FloatArray]
+    ) -> float | None:
+        """The share of the final model's residual a function of the state explains, for the
+        unexplained residual's description (None: not said)."""
+        return None
+
+
+_ABSENT = object()
+
+
+def hook(problem: Any, name: str) -> Any:
+    """The problem's own ``name`` or, where it has none, :class:`Hooks`' (a method bound to
+    the problem). A name Hooks does not declare is refused (a misspelt hook would otherwise
+    fall silently to a default)."""
+    default = Hooks.__dict__.get(name, _ABSENT)
+    if default is _ABSENT:
+        raise AttributeError(f"{name!r} is not an optional hook of a Problem (see Hooks)")
+    own = getattr(problem, name, _ABSENT)
+    if own is not _ABSENT:
+        return own
+    return default.__get__(problem) if inspect.isfunction(default) else default
 
 
 @dataclass(frozen=True)

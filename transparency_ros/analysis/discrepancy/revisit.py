@@ -28,6 +28,7 @@ import numpy as np
 from transparency_ros.analysis.discrepancy.findings import Report, update_findings
 from transparency_ros.analysis.discrepancy.fitting import aic, fit_cost, interval, refit, rmse
 from transparency_ros.analysis.discrepancy.model import FloatArray
+from transparency_ros.analysis.discrepancy.problem import hook
 from transparency_ros.analysis.discrepancy.steps import ALIKE, Base, null_inside, same, total
 
 if TYPE_CHECKING:
@@ -255,7 +256,7 @@ def variants_again(
         after = ", ".join(
             f"{n} {v:.4g}" for n, v in zip(variant.param_names, new_params[i], strict=True)
         )
-        unit = getattr(problem, "unit", "rad")
+        unit = hook(problem, "unit")
         loop.progress(f"{named.name} named as its variant of fewer parameters on the final model")
         report.notes.append(
             f"{named.name} ({before}; {now.rmse:.4g} {unit} held-out RMSE) explains the"
@@ -390,7 +391,7 @@ def friction_given_away(
         findings.append(loop._finding(taker, step, base, base.rmse, step.rmse))
         new_effects, new_params, after = [*held, taker], step.params, step.rmse
         result = step.result if step.joint else None
-    unit = getattr(problem, "unit", "rad")
+    unit = hook(problem, "unit")
     fitted = "no Coulomb torque" if whole else f"its Coulomb torque x{coulomb:.3g}"
     held_to = "" if smaller is None else f"held to {', '.join(smaller[0].param_names)}: "
     loop.progress(f"{drift.name} with {fitted} gives way to {taker.name}")
